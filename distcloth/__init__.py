@@ -1,0 +1,1 @@
+"""distcloth: a distributed-memory cloth simulator on MPI and PETSc."""

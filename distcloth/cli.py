@@ -1,0 +1,102 @@
+"""Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``.
+
+Arguments with a single leading dash (``-distcloth_ksp_rtol 1e-8``,
+``-log_view``) are PETSc options and go to PETSc untouched; the command
+line wins over the scene's ``solver:`` section.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import traceback
+
+
+def split_petsc_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """Separate PETSc options (single dash + letter, with an optional value) from ours."""
+    ours, petsc = [], []
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a.startswith("-") and not a.startswith("--") and len(a) > 1 and a[1].isalpha():
+            petsc.append(a)
+            if i + 1 < len(argv) and not _looks_like_option(argv[i + 1]) \
+                    and not argv[i + 1].endswith((".yaml", ".yml")):
+                petsc.append(argv[i + 1])
+                i += 1
+        else:
+            ours.append(a)
+        i += 1
+    return ours, petsc
+
+
+def _looks_like_option(s: str) -> bool:
+    if not s.startswith("-"):
+        return False
+    try:
+        float(s)
+        return False
+    except ValueError:
+        return True
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="distcloth", allow_abbrev=False,
+                                description="Distributed cloth simulation on MPI and PETSc.",
+                                epilog="PETSc options (single dash) pass through, e.g. "
+                                       "-distcloth_ksp_rtol 1e-8 or -log_view.")
+    sub = p.add_subparsers(dest="command", required=True)
+    for name, help_ in (("run", "run a scene"), ("check", "validate a scene without running it")):
+        s = sub.add_parser(name, help=help_, allow_abbrev=False)
+        s.add_argument("scene", help="scene YAML file")
+        s.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a config value (checked like the file), e.g. time.step=0.01")
+        if name == "run":
+            s.add_argument("--output", help="HDF5 output file (default: output.file of the scene)")
+            s.add_argument("--force", action="store_true",
+                           help="run an explicit step above the stability limit anyway")
+            s.add_argument("--quiet", action="store_true", help="no progress or summaries")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ours, petsc_args = split_petsc_args(argv)
+    args = build_parser().parse_args(ours)
+
+    from .linalg.petsc import command_line_options, init_petsc
+    init_petsc(petsc_args)
+    from .parallel.comm import Comm
+    comm = Comm()
+    try:
+        return _main(args, comm, command_line_options())
+    except SystemExit:
+        raise
+    except BaseException:  # a bug: never leave the other ranks waiting
+        sys.stderr.write(f"[distcloth rank {comm.rank}] unexpected error:\n{traceback.format_exc()}")
+        if comm.size > 1:
+            comm.abort(1)
+        return 1
+
+
+def _main(args, comm, cmdline_options) -> int:
+    from .config import ConfigError, format_config_error, load_config
+    from .run import run
+    cfg, message = None, None
+    if comm.rank == 0:
+        try:
+            cfg = load_config(args.scene, args.overrides)
+        except ConfigError as exc:
+            message = format_config_error(exc)
+    cfg, message = comm.bcast((cfg, message))
+    if message is not None:
+        if comm.rank == 0:
+            print(message, file=sys.stderr, flush=True)
+        return 2
+    if args.command == "check":
+        return run(cfg, comm, cmdline_options=cmdline_options, check_only=True)
+    return run(cfg, comm, output=args.output, force=args.force,
+               cmdline_options=cmdline_options, quiet=args.quiet)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,558 @@
+"""YAML scene file (plus ``--set`` overrides) -> checked :class:`SceneConfig`.
+
+Every value is checked here, before any work starts, so that a bad scene
+stops the run with one line naming the key path (docs/config.md).  A null
+value means "not given": the default is used, as ``shear: null`` documents;
+keys without a default (cloth, mesh, grid size and resolution) must be given.
+Whether PETSc knows a solver option is checked later, by the solver code.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import os
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .checks import (exactly_one_of, format_value, join, read_bool, read_choice, read_float,
+                     read_int, read_list, read_mapping, read_section, read_str, read_vector)
+from .schema import (DEFAULT_SOLVER, EFFECTS, GRID_CORNERS, GRID_EDGES, GRID_PATTERNS,
+                     INTEGRATORS, MAT_TYPES, MATERIAL_MODELS, ClothSpec, ConfigError, GridSpec,
+                     MaterialSpec, MeshSpec, OutputSpec, PinSpec, SceneConfig, TimeSpec)
+
+# --- the key tree: every key a scene may hold --------------------------------
+# A dict lists the keys of a mapping, a one-element list is a list of such
+# mappings, LEAF is a value checked by its reader, ANY_KEY is the solver
+# section (free PETSc option names).  Used both to refuse unknown keys and to
+# check the paths of --set overrides.
+LEAF = None
+ANY_KEY = "any key"
+
+
+def _leaves(*names: str) -> dict:
+    return dict.fromkeys(names, LEAF)
+
+
+GRID_KEYS = _leaves("size", "resolution", "pattern")
+MESH_KEYS = {"grid": GRID_KEYS, **_leaves("file", "scale", "center", "rotation")}
+BOX_KEYS = _leaves("min", "max")
+PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS}
+MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping")
+CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
+TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance")
+OUTPUT_KEYS = _leaves("file", "every", "preview")
+SCENE_KEYS = {"scene": LEAF, "cloth": [CLOTH_KEYS], **_leaves("effects", "gravity", "drag"),
+              "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS}
+
+MESH_SUFFIXES = (".obj", ".ply")
+OUTPUT_SUFFIXES = (".h5", ".hdf5")
+SOLVER_PREFIX = "distcloth_"
+OPTION_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
+# PyYAML (YAML 1.1) wants a dot in a float: '1e-8' comes back as a string
+YAML11_MISSED_FLOAT = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
+MAX_NEWTON_ITERATIONS = 100
+
+# defaults come from the dataclasses, so schema.py stays their one source
+DEFAULT_MESH, DEFAULT_MATERIAL = MeshSpec(), MaterialSpec()
+DEFAULT_TIME, DEFAULT_OUTPUT = TimeSpec(), OutputSpec()
+DEFAULT_SCENE = SceneConfig(scene="", cloth=())
+
+
+# --- public entry points ------------------------------------------------------
+
+def load_config(path: str, overrides: Sequence[str] = ()) -> SceneConfig:
+    """Read the scene file at ``path``, apply ``key.path=value`` overrides,
+    check everything and return the typed configuration."""
+    raw = read_scene_file(path)
+    raw = apply_overrides(raw, overrides)
+    return config_from_dict(raw, os.path.dirname(os.path.abspath(path)), path)
+
+
+def read_scene_file(path: str) -> dict:
+    """The scene file's top-level mapping; every failure names the file."""
+    try:
+        with open(path, encoding="utf-8") as stream:
+            text = stream.read()
+    except OSError as err:
+        raise ConfigError(path, err.strerror, "a readable YAML scene file") from None
+    except UnicodeDecodeError:
+        raise ConfigError(path, "not UTF-8 text", "a readable YAML scene file") from None
+    try:
+        raw = yaml.load(text, Loader=_StrictLoader)
+    except yaml.YAMLError as err:
+        problem, where = _yaml_problem(err)
+        raise ConfigError(path, problem, "valid YAML" + where) from None
+    if not isinstance(raw, dict):
+        raise ConfigError(path, raw, "a YAML mapping with keys " + ", ".join(SCENE_KEYS))
+    return raw
+
+
+def config_from_dict(raw: dict, base_dir: str, source_name: str) -> SceneConfig:
+    """Check a raw scene mapping and build the typed configuration.
+
+    ``base_dir``: where relative mesh paths are looked for (the scene file's
+    directory); ``source_name``: the scene file, whose stem names the scene
+    by default and which errors about the whole mapping name."""
+    if not isinstance(raw, dict):
+        raise ConfigError(source_name, raw, "a YAML mapping with keys " + ", ".join(SCENE_KEYS))
+    top = read_mapping(raw, "", SCENE_KEYS)
+    # checked in the documented key order, so the first error is the first in the file
+    scene = _optional(top, "", "scene", Path(source_name).stem, read_str)
+    cloth = _read_cloth(top.get("cloth"), "cloth", base_dir)
+    effects = _read_effects(top.get("effects"), "effects")
+    gravity = _optional(top, "", "gravity", DEFAULT_SCENE.gravity, _read_vec3)
+    drag = _optional(top, "", "drag", DEFAULT_SCENE.drag, read_float, at_least=0)
+    time = _read_time(top.get("time"), "time")
+    solver, mat_type, warm_start, rebuild = _read_solver(top.get("solver"), "solver")
+    output = _read_output(top.get("output"), "output", time)
+    config = SceneConfig(scene=scene, cloth=cloth, effects=effects, gravity=gravity, drag=drag,
+                         time=time, solver=solver, mat_type=mat_type, warm_start=warm_start, pc_rebuild_every=rebuild,
+                         output=output)
+    source_text = yaml.dump(config_to_dict(config), Dumper=_ResolvedDumper, sort_keys=False)
+    return dataclasses.replace(config, source_text=source_text)
+
+
+def format_config_error(err: ConfigError) -> str:
+    """The one line a run stops with (docs/config.md)."""
+    return (f"distcloth: config error: {_one_line(err.key)}: {format_value(err.value)}"
+            f" — {_one_line(err.allowed)}")
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """yaml.safe_load, but a key given twice in one mapping is an error: PyYAML
+    would silently keep the last, and a second 'time:' section would hide the first."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":   # '<<' may be overridden
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                duplicate = key in seen
+            except TypeError:            # unhashable: the base class says so
+                continue
+            if duplicate:
+                raise yaml.constructor.ConstructorError(
+                    "while constructing a mapping", node.start_mark,
+                    f"found duplicate key {key}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+# --- --set overrides ------------------------------------------------------------
+
+def apply_overrides(raw: dict, overrides: Sequence[str]) -> dict:
+    """A copy of ``raw`` with each ``key.path=value`` override set in turn.
+
+    The value is parsed as YAML and checked later like the file's values;
+    only the path is checked here, against the key tree.  Integer parts
+    address list elements (``cloth.0.material.stretch=20``)."""
+    result = copy.deepcopy(raw)
+    for text in overrides:
+        _apply_override(result, text)
+    return result
+
+
+def _apply_override(raw: dict, text: str) -> None:
+    path, equals, value_text = text.partition("=")
+    path = path.strip()
+    parts = path.split(".")
+    if not equals or "" in parts:
+        raise ConfigError("--set", text, "key.path=value, e.g. time.step=0.01")
+    try:
+        value = yaml.safe_load(value_text)
+    except yaml.YAMLError as err:
+        problem, _ = _yaml_problem(err)
+        raise ConfigError(path, value_text, f"a YAML value ({problem})") from None
+
+    node: Any = raw          # the raw value at parts[:depth]
+    tree: Any = SCENE_KEYS   # its entry in the key tree
+    for depth, part in enumerate(parts):
+        here = ".".join(parts[:depth])
+        last = depth == len(parts) - 1
+        if isinstance(tree, dict):
+            if part not in tree:
+                where = here or "the top level"
+                raise ConfigError(path, value, f"no such key; allowed under {where}: "
+                                  + ", ".join(tree))
+            slot, child_tree = part, tree[part]
+        elif tree == ANY_KEY:
+            if not last:
+                raise ConfigError(path, value, f"{here} options take single values")
+            slot, child_tree = part, LEAF
+        else:
+            # a list of mappings, or a leaf whose value is a list (vectors, effects)
+            if node is None:
+                raise ConfigError(path, value, f"{here} is not in the scene: set it whole")
+            if not isinstance(node, list):
+                raise ConfigError(path, value, f"{here} is a single value")
+            if not (part.isascii() and part.isdigit() and int(part) < len(node)):
+                raise ConfigError(path, value, f"an index 0 <= i < {len(node)}: {here} has "
+                                  f"{len(node)} element(s)")
+            if tree is LEAF and not last:
+                raise ConfigError(path, value, f"{here}.{part} is a single value")
+            slot, child_tree = int(part), (tree[0] if tree else LEAF)
+        if last:
+            node[slot] = value
+            return
+        node = _override_child(node, slot, child_tree, path, value, join(here, part))
+        tree = child_tree
+
+
+def _override_child(node: Any, slot: Any, child_tree: Any, path: str, value: Any,
+                    child_path: str) -> Any:
+    """The raw value at ``node[slot]``, made a mapping or list as the key tree
+    says so that the override can go on down."""
+    child = node.get(slot) if isinstance(node, dict) else node[slot]
+    if isinstance(child_tree, list):
+        if isinstance(child, dict):      # a single mapping is a one-element list
+            child = node[slot] = [child]
+        if child is None:
+            raise ConfigError(path, value, f"{child_path} is not in the scene: set it whole")
+        if not isinstance(child, list):
+            raise ConfigError(path, value, f"{child_path} is not a list")
+    elif isinstance(child_tree, dict) or child_tree == ANY_KEY:
+        if child is None:                # an absent section: start it
+            child = node[slot] = {}
+        if not isinstance(child, dict):
+            raise ConfigError(path, value, f"{child_path} is not a mapping")
+    return child
+
+
+# --- sections -------------------------------------------------------------------
+
+def _optional(section: dict, key: str, name: str, default: Any, read, *args, **kwargs) -> Any:
+    """``section[name]`` checked by ``read``, or ``default`` if absent or null."""
+    value = section.get(name)
+    return default if value is None else read(value, join(key, name), *args, **kwargs)
+
+
+def _required(section: dict, key: str, name: str, what: str, read, *args, **kwargs) -> Any:
+    value = section.get(name)
+    if value is None:
+        raise ConfigError(join(key, name), value, f"required: {what}")
+    return read(value, join(key, name), *args, **kwargs)
+
+
+def _read_vec3(value: Any, key: str) -> tuple[float, float, float]:
+    return read_vector(value, key, 3, read_float, "numbers")
+
+
+def _read_cloth(value: Any, key: str, base_dir: str) -> tuple[ClothSpec, ...]:
+    if isinstance(value, dict):          # a single mapping is a one-piece list
+        value = [value]
+    if not isinstance(value, list) or not value:
+        raise ConfigError(key, value, "a non-empty list of cloth pieces")
+    pieces: list[ClothSpec] = []
+    first_with_name: dict[str, int] = {}
+    for index, raw_piece in enumerate(value):
+        piece = _read_piece(raw_piece, join(key, index), index, base_dir)
+        if piece.name in first_with_name:
+            raise ConfigError(join(join(key, index), "name"), piece.name,
+                              f"a name no other piece has (cloth.{first_with_name[piece.name]}"
+                              " has it)")
+        first_with_name[piece.name] = index
+        pieces.append(piece)
+    return tuple(pieces)
+
+
+def _read_piece(value: Any, key: str, index: int, base_dir: str) -> ClothSpec:
+    section = read_mapping(value, key, CLOTH_KEYS)
+    mesh = _required(section, key, "mesh", "a mapping with grid: or file:", _read_mesh, base_dir)
+    return ClothSpec(
+        name=_optional(section, key, "name", f"piece{index}", read_str),
+        mesh=mesh,
+        pins=_read_pins(section.get("pins"), join(key, "pins"), mesh),
+        material=_read_material(section.get("material"), join(key, "material")),
+    )
+
+
+def _read_mesh(value: Any, key: str, base_dir: str) -> MeshSpec:
+    section = read_mapping(value, key, MESH_KEYS)
+    kind = exactly_one_of(section, key, ("grid", "file"))
+    placement = dict(
+        center=_optional(section, key, "center", DEFAULT_MESH.center, _read_vec3),
+        rotation=_optional(section, key, "rotation", DEFAULT_MESH.rotation, _read_vec3),
+    )
+    if kind == "grid":
+        if section.get("scale") is not None:
+            raise ConfigError(join(key, "scale"), section["scale"], "only for file meshes")
+        return MeshSpec(grid=_read_grid(section["grid"], join(key, "grid")), **placement)
+    return MeshSpec(
+        file=_read_mesh_file(section["file"], join(key, "file"), base_dir),
+        scale=_optional(section, key, "scale", DEFAULT_MESH.scale, read_float, above=0),
+        **placement,
+    )
+
+
+def _read_grid(value: Any, key: str) -> GridSpec:
+    section = read_mapping(value, key, GRID_KEYS)
+    return GridSpec(
+        size=_required(section, key, "size", "[width, height] in m", read_vector, 2,
+                       _read_positive, "numbers > 0"),
+        resolution=_required(section, key, "resolution", "[nu, nv] vertices", read_vector, 2,
+                             _read_resolution, "integers >= 2"),
+        pattern=_optional(section, key, "pattern", GridSpec.pattern, read_choice, GRID_PATTERNS),
+    )
+
+
+def _read_positive(value: Any, key: str) -> float:
+    return read_float(value, key, above=0)
+
+
+def _read_resolution(value: Any, key: str) -> int:
+    return read_int(value, key, at_least=2)
+
+
+def _read_mesh_file(value: Any, key: str, base_dir: str) -> str:
+    """The absolute path of an existing OBJ or PLY file; relative paths are
+    relative to the scene file, so a scene and its meshes move together."""
+    allowed = "an existing " + " or ".join(MESH_SUFFIXES) + " file"
+    path = read_str(value, key, allowed)
+    if not path.lower().endswith(MESH_SUFFIXES):
+        raise ConfigError(key, value, allowed)
+    full = os.path.abspath(os.path.join(base_dir, os.path.expanduser(path)))
+    if not os.path.isfile(full):
+        raise ConfigError(key, value, f"{allowed} (not found: {full})")
+    return full
+
+
+def _read_pins(value: Any, key: str, mesh: MeshSpec) -> tuple[PinSpec, ...]:
+    if value is None:
+        return ()
+    if isinstance(value, dict):          # a single pin, as for cloth pieces
+        value = [value]
+    read_list(value, key, "pins, each with one of " + ", ".join(PIN_KEYS))
+    return tuple(_read_pin(pin, join(key, i), mesh) for i, pin in enumerate(value))
+
+
+def _read_pin(value: Any, key: str, mesh: MeshSpec) -> PinSpec:
+    section = read_mapping(value, key, PIN_KEYS)
+    kind = exactly_one_of(section, key, PIN_KEYS)
+    entry, entry_key = section[kind], join(key, kind)
+    if kind in ("edge", "corner"):
+        if mesh.grid is None:
+            raise ConfigError(entry_key, entry,
+                              f"{kind} pins only on grid meshes; use indices or box")
+        names = GRID_EDGES if kind == "edge" else GRID_CORNERS
+        return PinSpec(**{kind: read_choice(entry, entry_key, names)})
+    if kind == "indices":
+        return PinSpec(indices=_read_indices(entry, entry_key, mesh))
+    box = read_mapping(entry, entry_key, BOX_KEYS)
+    low = _required(box, entry_key, "min", "[x, y, z] in m", _read_vec3)
+    high = _required(box, entry_key, "max", "[x, y, z] in m", _read_vec3)
+    if any(a > b for a, b in zip(low, high)):
+        raise ConfigError(entry_key, entry, "min <= max in every component")
+    return PinSpec(box_min=low, box_max=high)
+
+
+def _read_indices(value: Any, key: str, mesh: MeshSpec) -> tuple[int, ...]:
+    """Vertex indices of the piece; a file mesh's vertex count is known only
+    once the scene builder reads it, so only grids are bounded here."""
+    if not isinstance(value, list) or not value:
+        raise ConfigError(key, value, "a non-empty list of vertex indices")
+    count = None if mesh.grid is None else mesh.grid.resolution[0] * mesh.grid.resolution[1]
+    indices = []
+    for i, entry in enumerate(value):
+        index = read_int(entry, join(key, i), at_least=0)
+        if count is not None and index >= count:
+            raise ConfigError(join(key, i), entry,
+                              f"a vertex index 0 <= i < {count} (the grid's vertex count)")
+        indices.append(index)
+    return tuple(indices)
+
+
+def _read_material(value: Any, key: str) -> MaterialSpec:
+    section = read_section(value, key, MATERIAL_KEYS)
+    d = DEFAULT_MATERIAL
+    return MaterialSpec(
+        model=_optional(section, key, "model", d.model, read_choice, MATERIAL_MODELS),
+        density=_optional(section, key, "density", d.density, read_float, above=0),
+        stretch=_optional(section, key, "stretch", d.stretch, read_float, above=0),
+        shear=_optional(section, key, "shear", d.shear, read_float, at_least=0),
+        bending=_optional(section, key, "bending", d.bending, read_float, at_least=0),
+        damping=_optional(section, key, "damping", d.damping, read_float, at_least=0),
+    )
+
+
+def _read_effects(value: Any, key: str) -> tuple[str, ...]:
+    if value is None:
+        return DEFAULT_SCENE.effects
+    read_list(value, key, "effect names: " + ", ".join(EFFECTS))
+    effects: list[str] = []
+    for i, name in enumerate(value):
+        read_choice(name, join(key, i), EFFECTS)
+        if name in effects:
+            raise ConfigError(join(key, i), name, "each effect at most once")
+        effects.append(name)
+    return tuple(effects)
+
+
+def _read_time(value: Any, key: str) -> TimeSpec:
+    section = read_section(value, key, TIME_KEYS)
+    d = DEFAULT_TIME
+    end = _optional(section, key, "end", d.end, read_float, above=0)
+    step = _optional(section, key, "step", d.step, read_float, above=0)
+    if step > end:
+        raise ConfigError(join(key, "step"), step,
+                          f"a number > 0 and <= time.end ({end:g})")
+    return TimeSpec(
+        end=end,
+        step=step,
+        integrator=_optional(section, key, "integrator", d.integrator, read_choice, INTEGRATORS),
+        newton_iterations=_optional(section, key, "newton_iterations", d.newton_iterations,
+                                    read_int, at_least=1, at_most=MAX_NEWTON_ITERATIONS),
+        newton_tolerance=_optional(section, key, "newton_tolerance", d.newton_tolerance,
+                                   read_float, above=0),
+    )
+
+
+def _read_solver(value: Any, key: str) -> tuple[tuple[tuple[str, Any], ...], str, bool, int]:
+    """PETSc options: the defaults, replaced or extended by the scene's; the
+    distcloth-only mat_type and warm_start are taken out."""
+    if value is None:
+        value = {}
+    if not isinstance(value, dict):
+        raise ConfigError(key, value, "a mapping of PETSc options without '-' and prefix")
+    options = dict(DEFAULT_SOLVER)
+    mat_type = DEFAULT_SCENE.mat_type
+    warm_start = DEFAULT_SCENE.warm_start
+    rebuild = DEFAULT_SCENE.pc_rebuild_every
+    for name, entry in value.items():
+        option_key = join(key, name)
+        _check_option_name(name, option_key, entry)
+        if entry is None:
+            continue
+        if name == "mat_type":
+            mat_type = read_choice(entry, option_key, MAT_TYPES)
+        elif name == "warm_start":
+            warm_start = read_bool(entry, option_key)
+        elif name == "pc_rebuild_every":
+            rebuild = read_int(entry, option_key, at_least=1)
+        else:
+            options[name] = _read_option_value(entry, option_key)
+    return tuple(options.items()), mat_type, warm_start, rebuild
+
+
+def _check_option_name(name: Any, key: str, entry: Any) -> None:
+    if isinstance(name, str) and name.startswith("-"):
+        raise ConfigError(key, entry, "a PETSc option without the leading '-': "
+                          f"write {name.lstrip('-')}")
+    if isinstance(name, str) and name.startswith(SOLVER_PREFIX):
+        raise ConfigError(key, entry, f"a PETSc option without the prefix {SOLVER_PREFIX} "
+                          f"(distcloth adds it): write {name[len(SOLVER_PREFIX):]}")
+    if not isinstance(name, str) or not OPTION_NAME.match(name):
+        raise ConfigError(key, entry, "a PETSc option name: lower-case letters, digits and _,"
+                          " starting with a letter")
+
+
+def _read_option_value(entry: Any, key: str) -> Any:
+    allowed = "a string, a finite number or a boolean"
+    if isinstance(entry, str) and YAML11_MISSED_FLOAT.match(entry):
+        return float(entry)     # 'ksp_rtol: 1e-8' means the number, as '1.0e-8' would
+    if isinstance(entry, bool) or (isinstance(entry, str) and entry):
+        return entry
+    if isinstance(entry, (int, float)):
+        return entry if isinstance(entry, int) else read_float(entry, key)
+    raise ConfigError(key, entry, allowed)
+
+
+def _read_output(value: Any, key: str, time: TimeSpec) -> OutputSpec:
+    section = read_section(value, key, OUTPUT_KEYS)
+    d = DEFAULT_OUTPUT
+    every = _optional(section, key, "every", d.every, read_float, above=0)
+    if every < time.step:
+        raise ConfigError(join(key, "every"), every,
+                          f"a number >= time.step ({time.step:g}): frames cannot be more "
+                          "frequent than steps")
+    return OutputSpec(
+        file=_optional(section, key, "file", d.file, _read_output_file),
+        every=every,
+        preview=_optional(section, key, "preview", d.preview, read_bool),
+    )
+
+
+def _read_output_file(value: Any, key: str) -> str:
+    """Kept relative to the current directory, as given (normalised)."""
+    allowed = "a file name ending in " + " or ".join(OUTPUT_SUFFIXES)
+    path = read_str(value, key, allowed)
+    name = os.path.basename(path).lower()
+    if not name.endswith(OUTPUT_SUFFIXES) or name in OUTPUT_SUFFIXES:
+        raise ConfigError(key, value, allowed)
+    return os.path.normpath(path)
+
+
+# --- the resolved configuration as plain data -----------------------------------
+
+def config_to_dict(config: SceneConfig) -> dict:
+    """``config`` as YAML-ready plain data that :func:`config_from_dict` reads
+    back to an equal configuration (written into the output file)."""
+    return {
+        "scene": config.scene,
+        "cloth": [_piece_to_dict(piece) for piece in config.cloth],
+        "effects": list(config.effects),
+        "gravity": list(config.gravity),
+        "drag": config.drag,
+        "time": dataclasses.asdict(config.time),
+        "solver": {**dict(config.solver), "mat_type": config.mat_type,
+                   "warm_start": config.warm_start, "pc_rebuild_every": config.pc_rebuild_every},
+        "output": dataclasses.asdict(config.output),
+    }
+
+
+class _ResolvedDumper(yaml.SafeDumper):
+    """safe_dump, but lists of scalars (vectors, effects, indices) on one line
+    as in docs/config.md; mappings stay in block style."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    flat = not any(isinstance(item, (list, dict)) for item in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flat)
+
+
+_ResolvedDumper.add_representer(list, _represent_list)
+
+
+def _piece_to_dict(piece: ClothSpec) -> dict:
+    mesh = piece.mesh
+    if mesh.grid is not None:
+        shape: dict = {"grid": {"size": list(mesh.grid.size),
+                                "resolution": list(mesh.grid.resolution),
+                                "pattern": mesh.grid.pattern}}
+    else:
+        shape = {"file": mesh.file, "scale": mesh.scale}
+    return {
+        "name": piece.name,
+        "mesh": {**shape, "center": list(mesh.center), "rotation": list(mesh.rotation)},
+        "pins": [_pin_to_dict(pin) for pin in piece.pins],
+        "material": dataclasses.asdict(piece.material),
+    }
+
+
+def _pin_to_dict(pin: PinSpec) -> dict:
+    if pin.edge is not None:
+        return {"edge": pin.edge}
+    if pin.corner is not None:
+        return {"corner": pin.corner}
+    if pin.indices is not None:
+        return {"indices": list(pin.indices)}
+    return {"box": {"min": list(pin.box_min), "max": list(pin.box_max)}}
+
+
+# --- helpers ----------------------------------------------------------------------
+
+def _yaml_problem(err: yaml.YAMLError) -> tuple[str, str]:
+    """What PyYAML found wrong, and where ('' if it does not say)."""
+    problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+    mark = getattr(err, "problem_mark", None)
+    where = "" if mark is None else f" (error at line {mark.line + 1}, column {mark.column + 1})"
+    return problem, where
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).splitlines())

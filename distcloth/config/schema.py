@@ -1,0 +1,122 @@
+"""Typed scene configuration: frozen dataclasses with defaults, SI units.
+
+The YAML layout and every allowed value are documented in docs/config.md;
+:mod:`distcloth.config.load` turns YAML (plus ``--set`` overrides) into these
+objects and refuses anything else with a :class:`ConfigError`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+EFFECTS = ("gravity", "membrane", "bending", "damping", "drag")
+INTEGRATORS = ("backward_euler", "symplectic_euler")
+GRID_PATTERNS = ("regular", "alternating")
+GRID_EDGES = ("left", "right", "bottom", "top")
+GRID_CORNERS = ("bottom_left", "bottom_right", "top_left", "top_right")
+MATERIAL_MODELS = ("mass_spring",)
+MAT_TYPES = ("baij", "aij")
+
+# PETSc options a scene gets unless it says otherwise (seed 000 §5.6: CG with
+# block Jacobi over the ranks, SSOR on each block; BAIJ SOR allows only
+# omega = 1, i.e. symmetric Gauss-Seidel).
+DEFAULT_SOLVER: dict[str, Any] = {
+    "ksp_type": "cg",
+    "pc_type": "bjacobi",
+    "sub_pc_type": "sor",
+    "ksp_rtol": 1.0e-5,
+}
+
+
+class ConfigError(Exception):
+    """A bad configuration value: key path, the value, and what is allowed."""
+
+    def __init__(self, key: str, value: Any, allowed: str):
+        self.key, self.value, self.allowed = key, value, allowed
+        super().__init__(f"{key}: {value!r} — {allowed}")
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    size: tuple[float, float]
+    resolution: tuple[int, int]
+    pattern: str = "alternating"
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    grid: GridSpec | None = None
+    file: str | None = None           # absolute path after loading (relative: to the scene file)
+    scale: float = 1.0
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)   # degrees about x, y, z
+
+
+@dataclass(frozen=True)
+class PinSpec:
+    edge: str | None = None
+    corner: str | None = None
+    indices: tuple[int, ...] | None = None
+    box_min: tuple[float, float, float] | None = None
+    box_max: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class MaterialSpec:
+    model: str = "mass_spring"
+    density: float = 0.1          # kg/m^2
+    stretch: float = 10.0         # N/m
+    shear: float | None = None    # N/m, None: stretch / 10
+    bending: float = 1.0e-6       # N*m
+    damping: float = 0.0          # s
+
+    @property
+    def shear_stiffness(self) -> float:
+        return self.stretch / 10.0 if self.shear is None else self.shear
+
+
+@dataclass(frozen=True)
+class ClothSpec:
+    name: str
+    mesh: MeshSpec
+    pins: tuple[PinSpec, ...] = ()
+    material: MaterialSpec = field(default_factory=MaterialSpec)
+
+
+@dataclass(frozen=True)
+class TimeSpec:
+    end: float = 1.0
+    step: float = 0.01
+    integrator: str = "backward_euler"
+    newton_iterations: int = 1
+    newton_tolerance: float = 1.0e-8
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    file: str = "out/result.h5"
+    every: float = 0.1
+    preview: bool = True
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    scene: str
+    cloth: tuple[ClothSpec, ...]
+    effects: tuple[str, ...] = ("gravity", "membrane", "bending")
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    drag: float = 0.0
+    time: TimeSpec = field(default_factory=TimeSpec)
+    solver: tuple[tuple[str, Any], ...] = tuple(DEFAULT_SOLVER.items())   # PETSc options (no prefix)
+    mat_type: str = "baij"
+    warm_start: bool = False       # start each solve from the previous step's solution
+    pc_rebuild_every: int = 1      # rebuild the preconditioner every k-th solve, reuse it between
+    output: OutputSpec = field(default_factory=OutputSpec)
+    source_text: str = ""          # the resolved config as YAML, for the output file
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    @property
+    def solver_options(self) -> dict[str, Any]:
+        return dict(self.solver)

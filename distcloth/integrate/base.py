@@ -1,0 +1,26 @@
+"""What an integrator returns for one step."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class StepResult:
+    x: np.ndarray                 # (n_owned, 3) proposed positions
+    v: np.ndarray                 # (n_owned, 3) proposed velocities
+    newton_iterations: int = 0
+    ksp_iterations: int = 0       # summed over the step's solves
+    ksp_residual: float = 0.0     # largest true relative residual of the step's solves
+    newton_residual: float = 0.0  # final relative Newton residual (0 for explicit steps)
+
+
+class Integrator:
+    implicit = True
+
+    def __init__(self, cfg):
+        self.cfg = cfg
+
+    def step(self, sim, h: float, cons) -> StepResult:
+        raise NotImplementedError

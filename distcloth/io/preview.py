@@ -1,0 +1,219 @@
+"""Quick-look pictures of a result file (rank 0, after the run, serial read).
+
+``<stem>_frames.png``: the first, two intermediate and the last written frame
+as Lambert-shaded surfaces in one common, equal-aspect bounding box.
+``<stem>_energy.png``: energies, solver iterations and the stage-time split.
+
+Uses matplotlib's object API with the Agg canvas (no pyplot, no global
+backend switch), so it is safe to call from inside any program.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+from distcloth.io.h5read import read_attrs, read_result
+
+# Poly3DCollection costs ~20 us per polygon to sort and draw; beyond this
+# many triangles per panel the mesh is decimated for the picture.
+MAX_PREVIEW_TRIANGLES = 30000
+_CLOTH_RGB = np.array([0.30, 0.52, 0.80])
+_LIGHT = np.array([0.35, -0.45, 0.82]) / np.linalg.norm([0.35, -0.45, 0.82])
+ENERGY_NAMES = ("kinetic_energy", "gravitational_energy", "elastic_energy", "total_energy")
+ITERATION_NAMES = ("ksp_iterations", "newton_iterations")
+
+
+def pick_frames(n_frames: int, count: int = 4) -> list[int]:
+    """``count`` frame indices spread from the first to the last (fewer if not available)."""
+    if n_frames <= 0:
+        return []
+    return sorted(set(np.round(np.linspace(0, n_frames - 1, count)).astype(int).tolist()))
+
+
+def decimate(rest: np.ndarray, triangles: np.ndarray, target: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex clustering on the rest shape: (cluster of each vertex, triangles
+    between clusters) with about ``target`` triangles at most.
+
+    Clustering in the rest shape keeps one coarse mesh for all frames, and
+    unlike dropping random triangles it leaves no holes.  Each coarse vertex
+    is later placed at the mean of its cluster.
+    """
+    nt = triangles.shape[0]
+    edges = rest[triangles[:, [1, 2, 0]]] - rest[triangles]
+    h = np.mean(np.linalg.norm(edges, axis=2)) * np.sqrt(nt / target)
+    lo = rest.min(axis=0)
+    for _ in range(8):
+        cells = np.floor((rest - lo) / h).astype(np.int64)
+        _, cluster = np.unique(cells, axis=0, return_inverse=True)
+        cluster = cluster.ravel()
+        t = np.sort(cluster[triangles], axis=1)
+        keep = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2])
+        coarse = np.unique(t[keep], axis=0)
+        if coarse.shape[0] <= target:
+            return cluster, coarse
+        h *= 1.1 * np.sqrt(coarse.shape[0] / target)
+    return cluster, coarse
+
+
+def _shade(tri_xyz: np.ndarray) -> np.ndarray:
+    """RGB per triangle: ambient + two-sided Lambert term of its normal."""
+    nrm = np.cross(tri_xyz[:, 1] - tri_xyz[:, 0], tri_xyz[:, 2] - tri_xyz[:, 0])
+    length = np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
+    lambert = np.abs(nrm @ _LIGHT)           # cloth has two sides: light either
+    return np.clip(_CLOTH_RGB[None, :] * (0.3 + 0.8 * lambert[:, None]), 0.0, 1.0)
+
+
+def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int) -> None:
+    positions, times = res["positions"], res["time"]
+    tri = res["triangles"]
+    nt = tri.shape[0]
+    note = ""
+    if nt > max_triangles:
+        cluster, tri = decimate(res["rest_positions"], tri, max_triangles)
+        counts = np.bincount(cluster).astype(float)
+        coarse = np.empty((positions.shape[0], counts.size, 3))
+        for f, x in enumerate(positions):
+            for c in range(3):
+                coarse[f, :, c] = np.bincount(cluster, weights=x[:, c]) / counts
+        positions = coarse
+        note = f"\n(decimated: {tri.shape[0]} of {nt} triangles)"
+    lo = positions.reshape(-1, 3).min(axis=0)
+    hi = positions.reshape(-1, 3).max(axis=0)
+    span = np.maximum(hi - lo, 1e-3 * max(float((hi - lo).max()), 1e-9))
+    mid = 0.5 * (lo + hi)
+    lo, hi = mid - 0.5 * span, mid + 0.5 * span
+    fig = Figure(figsize=(4.2 * len(idx), 4.6), dpi=100)
+    FigureCanvasAgg(fig)
+    status = res["attrs"].get("status", "?")
+    fig.suptitle(f"{res['attrs'].get('scene', os.path.basename(out))}: {res['frames_written']} "
+                 f"frames written, status {status}{note}", fontsize=10)
+    for p, (x, t) in enumerate(zip(positions, times)):
+        ax = fig.add_subplot(1, len(idx), p + 1, projection="3d")
+        xyz = x[tri]
+        ax.add_collection3d(Poly3DCollection(xyz, facecolors=_shade(xyz), edgecolors="none",
+                                             linewidths=0))
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_zlim(lo[2], hi[2])
+        ax.set_box_aspect(span)             # equal aspect: one metre is one metre on every axis
+        ax.view_init(elev=25, azim=-60)
+        ax.set_title(f"frame {idx[p]}, t = {t:.4g} s", fontsize=9)
+        ax.tick_params(labelsize=6)
+    fig.tight_layout()
+    fig.savefig(out)
+
+
+def _finite(a) -> bool:
+    return a is not None and np.isfinite(a).any()
+
+
+def _energy_png(res: dict, out: str) -> None:
+    d = res["diagnostics"]
+    t = d.get("time", np.zeros(0))
+    fig = Figure(figsize=(16, 4.6), dpi=100)
+    FigureCanvasAgg(fig)
+    ax_e, ax_i, ax_s = (fig.add_subplot(1, 3, k) for k in (1, 2, 3))
+    fig.suptitle(f"{res['attrs'].get('scene', '')}: {res['steps_written']} steps, "
+                 f"status {res['attrs'].get('status', '?')}", fontsize=10)
+
+    # Energies: gravitational relative to its start, and total shifted by the
+    # same amount, so the curves add up on one axis.
+    g0 = 0.0
+    grav = d.get("gravitational_energy")
+    if _finite(grav):
+        g0 = float(grav[np.isfinite(grav)][0])
+    others = sorted(k for k in d if k.endswith("_energy") and k not in ENERGY_NAMES)
+    plotted = 0
+    for name in ENERGY_NAMES + tuple(others):
+        y = d.get(name)
+        if not _finite(y):
+            continue
+        label = name.replace("_", " ")
+        if name in ("gravitational_energy", "total_energy") and g0:
+            y = y - g0
+            label += " - start gravitational"
+        ax_e.plot(t, y, lw=2.0 if name == "total_energy" else 1.2,
+                  color="k" if name == "total_energy" else None, label=label)
+        plotted += 1
+    ax_e.set_xlabel("time [s]")
+    ax_e.set_ylabel("energy [J]")
+    ax_e.set_title("energy", fontsize=10)
+    if plotted:
+        ax_e.legend(fontsize=7)
+    else:
+        ax_e.text(0.5, 0.5, "no energy diagnostics", ha="center", transform=ax_e.transAxes)
+
+    plotted = 0
+    for name in ITERATION_NAMES:
+        if _finite(d.get(name)):
+            ax_i.plot(t, d[name], lw=1.0, label=name.replace("_", " "))
+            plotted += 1
+    ax_i.set_xlabel("time [s]")
+    ax_i.set_ylabel("iterations per step")
+    ax_i.set_title("solver", fontsize=10)
+    res_y = d.get("ksp_residual")
+    if _finite(res_y) and np.nanmax(res_y) > 0:
+        ax_r = ax_i.twinx()
+        ax_r.semilogy(t, np.where(res_y > 0, res_y, np.nan), color="0.5", lw=0.8, ls=":",
+                      label="ksp residual")
+        ax_r.set_ylabel("KSP residual", fontsize=8)
+        ax_r.legend(fontsize=7, loc="upper right")
+        plotted += 1
+    if plotted:
+        ax_i.legend(fontsize=7, loc="upper left")
+    else:
+        ax_i.text(0.5, 0.5, "no solver diagnostics", ha="center", transform=ax_i.transAxes)
+
+    # Stage time: stacked bars over up to 20 time bins show how the split
+    # changes along the run; the legend gives each stage's total.
+    st = {k: np.nan_to_num(v) for k, v in res["stage_time"].items()}
+    total = {k: float(v.sum()) for k, v in st.items()}
+    grand = sum(total.values())
+    if st and grand > 0 and t.size:
+        nb = min(20, t.size)
+        edges = np.linspace(0, t.size, nb + 1).astype(int)
+        centers = np.array([t[a:b].mean() for a, b in zip(edges[:-1], edges[1:])])
+        width = (t[-1] - t[0]) / nb if t.size > 1 and t[-1] > t[0] else 1.0
+        bottom = np.zeros(nb)
+        for name in sorted(st, key=total.get, reverse=True):
+            per_bin = np.add.reduceat(st[name], edges[:-1])
+            ax_s.bar(centers, per_bin, width=0.9 * width, bottom=bottom,
+                     label=f"{name}: {total[name]:.3g} s ({100 * total[name] / grand:.0f}%)")
+            bottom += per_bin
+        ax_s.set_xlabel("time [s]")
+        ax_s.set_ylabel("wall time per bin [s]")
+        ax_s.legend(fontsize=7)
+    else:
+        ax_s.text(0.5, 0.5, "no stage timings", ha="center", transform=ax_s.transAxes)
+    ax_s.set_title("stage time", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out)
+
+
+def write_previews(h5_path: str | os.PathLike, out_dir: str | os.PathLike | None = None,
+                   max_triangles: int = MAX_PREVIEW_TRIANGLES) -> list[str]:
+    """Write ``<stem>_frames.png`` (if any frame was written) and
+    ``<stem>_energy.png`` next to the file (or in ``out_dir``); return their paths.
+
+    Serial: call on one rank only (rank 0), after the writer is closed.
+    """
+    h5_path = os.fspath(h5_path)
+    stem = os.path.splitext(os.path.basename(h5_path))[0]
+    folder = os.fspath(out_dir) if out_dir is not None else os.path.dirname(os.path.abspath(h5_path))
+    os.makedirs(folder, exist_ok=True)
+    idx = pick_frames(int(read_attrs(h5_path).get("frames_written", 0)))
+    res = read_result(h5_path, frames=idx)     # only the frames shown are read
+    written = []
+    if idx:
+        path = os.path.join(folder, f"{stem}_frames.png")
+        _frames_png(res, idx, path, max_triangles)
+        written.append(path)
+    path = os.path.join(folder, f"{stem}_energy.png")
+    _energy_png(res, path)
+    written.append(path)
+    return written

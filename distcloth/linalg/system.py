@@ -1,0 +1,170 @@
+"""The implicit system in PETSc: fixed-pattern blocked matrix, KSP, checks.
+
+The matrix is BAIJ with 3x3 blocks by default (seed 000 Part 1 §5.7), or AIJ
+with block size 3 (needed by GAMG); both are filled through the same blocked
+CSR call from the pattern's value array.  Its sparsity is preallocated
+exactly and frozen (NEW_NONZERO_ALLOCATION_ERR): every step only overwrites
+values.  Rows are set only by their owner (NO_OFF_PROC_ENTRIES), so assembly
+sends nothing.
+
+Default solver: CG preconditioned by block Jacobi over the ranks with SOR on
+each rank's diagonal block (seed 000 §5.6).  PETSc's BAIJ SOR allows only
+omega = 1, so the sub-preconditioner is symmetric Gauss-Seidel.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .petsc import PREFIX, _libpetsc
+
+
+class SolverFailure(Exception):
+    pass
+
+
+@dataclass
+class SolveInfo:
+    iterations: int
+    reason: int
+    residual: float      # true relative residual |b - A y| / |b|
+
+
+class LinearSystem:
+    def __init__(self, layout, pattern, mat_type: str = "baij", warm_start: bool = False,
+                 pc_rebuild_every: int = 1):
+        from petsc4py import PETSc
+        self.PETSc = PETSc
+        self.comm = PETSc.COMM_WORLD
+        self.pattern = pattern
+        n, N = layout.n_owned, int(layout.ownership[-1])
+        self.n_owned = n
+        is_owned_col = np.zeros(layout.n_local, dtype=bool)
+        is_owned_col[:n] = True
+        d_nnz, o_nnz = pattern.counts(is_owned_col)
+        l2g = layout.local_to_global
+        self.indptr = pattern.indptr.astype(PETSc.IntType)
+        self.gcols = l2g[pattern.block_cols].astype(PETSc.IntType)
+
+        A = PETSc.Mat().create(self.comm)
+        A.setSizes(((3 * n, 3 * N), (3 * n, 3 * N)), bsize=3)
+        A.setType(PETSc.Mat.Type.BAIJ if mat_type == "baij" else PETSc.Mat.Type.AIJ)
+        A.setBlockSize(3)
+        if mat_type == "baij":
+            A.setPreallocationNNZ((d_nnz, o_nnz))
+        else:
+            A.setPreallocationNNZ((np.repeat(3 * d_nnz, 3), np.repeat(3 * o_nnz, 3)))
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        A.setOption(PETSc.Mat.Option.NO_OFF_PROC_ENTRIES, True)
+        # blocks are passed contiguous per block; column orientation + transposed
+        # blocks makes PETSc read each 3x3 block the right way round
+        A.setOption(PETSc.Mat.Option.ROW_ORIENTED, False)
+        self.A = A
+        self.mat_type = mat_type
+        self.warm_start = warm_start
+        # rebuild the preconditioner every k-th solve and reuse it between: an
+        # SPD preconditioner of a slightly older matrix keeps CG correct (only
+        # the iteration count can grow) and saves AMG set-up, the larger cost
+        self.pc_rebuild_every = max(1, int(pc_rebuild_every))
+        self.solves = 0
+        self.b = A.createVecLeft()
+        self.y = A.createVecRight()
+        self.r = A.createVecLeft()
+        self.ksp = PETSc.KSP().create(self.comm)
+        self.ksp.setOptionsPrefix(PREFIX)
+        self._configured = False
+
+    def set_values(self, data: np.ndarray) -> None:
+        self.A.setValuesBlockedCSR(self.indptr, self.gcols,
+                                   np.ascontiguousarray(data.transpose(0, 2, 1)))
+        self.A.assemble()
+
+    def configure(self) -> None:
+        """Apply the options database to the KSP and set it up (first matrix must be set)."""
+        ksp = self.ksp
+        ksp.setOperators(self.A)
+        ksp.setType("cg")
+        ksp.getPC().setType("bjacobi")
+        ksp.setFromOptions()
+        ksp.setUp()
+        if ksp.getPC().getType() == "bjacobi":
+            ksp.setUpOnBlocks()
+        self._configured = True
+
+    def block_jacobi_blocks(self) -> int:
+        """Local number of block-Jacobi blocks (0 if another preconditioner is in use)."""
+        pc = self.ksp.getPC()
+        if pc.getType() != "bjacobi":
+            return 0
+        return bjacobi_local_blocks(pc)
+
+    def describe(self) -> str:
+        pc = self.ksp.getPC()
+        sub = ""
+        if pc.getType() == "bjacobi":
+            opts = self.PETSc.Options()
+            sub = "/" + opts.getString(PREFIX + "sub_pc_type", "ilu")
+        return (f"{self.ksp.getType()} + {pc.getType()}{sub}, {self.mat_type} matrix, "
+                f"rtol {self.ksp.getTolerances()[0]:g}, norm {_norm_name(self.ksp.getNormType())}"
+                + (", warm start" if self.warm_start else "")
+                + (f", preconditioner rebuilt every {self.pc_rebuild_every} solves"
+                   if self.pc_rebuild_every > 1 else ""))
+
+    def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, SolveInfo]:
+        """Solve A y = rhs for this rank's rows; raises SolverFailure on divergence
+        (the reason is the same on every rank, so all ranks raise together).
+        With ``warm_start`` the previous solution is the initial guess."""
+        self.b.array[:] = rhs.ravel()
+        self.ksp.getPC().setReusePreconditioner(self.solves % self.pc_rebuild_every != 0)
+        self.solves += 1
+        if self.warm_start:
+            self.ksp.setInitialGuessNonzero(True)
+        else:
+            self.y.set(0.0)
+            self.ksp.setInitialGuessNonzero(False)
+        self.ksp.solve(self.b, self.y)
+        reason = self.ksp.getConvergedReason()
+        its = self.ksp.getIterationNumber()
+        self.A.mult(self.y, self.r)
+        self.r.aypx(-1.0, self.b)
+        bnorm = self.b.norm()
+        res = self.r.norm() / bnorm if bnorm > 0 else self.r.norm()
+        if reason < 0:
+            raise SolverFailure(f"linear solve did not converge: {_reason_name(reason)} "
+                                f"after {its} iterations, true relative residual {res:.3g}")
+        return self.y.array.reshape(-1, 3).copy(), SolveInfo(its, reason, res)
+
+    def destroy(self):
+        for obj in (self.ksp, self.A, self.b, self.y, self.r):
+            obj.destroy()
+
+
+def bjacobi_local_blocks(pc) -> int:
+    """PCBJacobiGetSubKSP's local block count (petsc4py 3.18 does not wrap it)."""
+    import ctypes
+    from petsc4py import PETSc
+    lib = _libpetsc()
+    itype = ctypes.c_int64 if np.dtype(PETSc.IntType).itemsize == 8 else ctypes.c_int32
+    n, first, ksps = itype(0), itype(0), ctypes.c_void_p(0)
+    err = lib.PCBJacobiGetSubKSP(ctypes.c_void_p(pc.handle), ctypes.byref(n), ctypes.byref(first),
+                                 ctypes.byref(ksps))
+    if err != 0:
+        raise RuntimeError(f"PCBJacobiGetSubKSP failed with PETSc error {err}")
+    return int(n.value)
+
+
+def _norm_name(norm: int) -> str:
+    from petsc4py import PETSc
+    for name in ("NONE", "PRECONDITIONED", "UNPRECONDITIONED", "NATURAL"):
+        if getattr(PETSc.KSP.NormType, name) == norm:
+            return name.lower()
+    return str(norm)
+
+
+def _reason_name(reason: int) -> str:
+    from petsc4py import PETSc
+    for name in dir(PETSc.KSP.ConvergedReason):
+        if not name.startswith("_") and getattr(PETSc.KSP.ConvergedReason, name) == reason:
+            return name
+    return str(reason)

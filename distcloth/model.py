@@ -1,0 +1,80 @@
+"""The Model: everything about a cloth that stays fixed during a run.
+
+Global arrays in *input order* (the order of the scene's pieces and their
+vertices), the same on every rank.  Per-rank views (owned + ghost vertices,
+local springs) live in :class:`distcloth.parallel.layout.LocalLayout`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# spring kinds (seed 002 §2.2)
+STRUCTURAL = 0
+SHEAR = 1
+FLEXION = 2
+SPRING_KIND_NAMES = ("structural", "shear", "flexion")
+
+
+@dataclass
+class PieceInfo:
+    """Where one cloth piece sits in the global arrays."""
+    name: str
+    vertex_start: int
+    vertex_stop: int
+    triangle_start: int
+    triangle_stop: int
+    grid_resolution: tuple[int, int] | None = None   # (nu, nv) for grids
+
+
+@dataclass
+class Model:
+    rest_positions: np.ndarray          # (n, 3) float64: initial = rest shape
+    triangles: np.ndarray               # (nt, 3) int64
+    vertex_mass: np.ndarray             # (n,) kg, lumped from areal density
+    vertex_area: np.ndarray             # (n,) m^2 lumped: a quarter of each adjacent grid cell, or a third of each adjacent triangle of a mesh file
+    spring_vertices: np.ndarray         # (ns, 2) int64
+    spring_rest_length: np.ndarray      # (ns,) m
+    spring_stiffness: np.ndarray        # (ns,) N/m
+    spring_damping: np.ndarray          # (ns,) N*s/m
+    spring_kind: np.ndarray             # (ns,) int8: STRUCTURAL, SHEAR, FLEXION
+    pinned: np.ndarray                  # (np,) int64 sorted unique vertex indices
+    pieces: list[PieceInfo] = field(default_factory=list)
+    initial_positions: np.ndarray | None = None   # (n, 3); None: the rest shape
+    initial_velocities: np.ndarray | None = None  # (n, 3); None: zero
+
+    @property
+    def num_vertices(self) -> int:
+        return self.rest_positions.shape[0]
+
+    @property
+    def num_springs(self) -> int:
+        return self.spring_vertices.shape[0]
+
+    def start_positions(self) -> np.ndarray:
+        return self.rest_positions if self.initial_positions is None else self.initial_positions
+
+    def start_velocities(self) -> np.ndarray:
+        if self.initial_velocities is None:
+            return np.zeros_like(self.rest_positions)
+        return self.initial_velocities
+
+    def size(self) -> float:
+        """The cloth's characteristic size L: the diagonal of its rest bounding box."""
+        span = self.rest_positions.max(axis=0) - self.rest_positions.min(axis=0)
+        return float(np.linalg.norm(span))
+
+    def matrix_graph(self) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex adjacency of the system matrix (every spring couples its two
+        ends, flexion stencils included) as CSR (xadj, adjncy), no self loops."""
+        n = self.num_vertices
+        i, j = self.spring_vertices[:, 0], self.spring_vertices[:, 1]
+        rows = np.concatenate([i, j])
+        cols = np.concatenate([j, i])
+        key = np.unique(rows * n + cols)
+        rows, cols = key // n, key % n
+        xadj = np.zeros(n + 1, dtype=np.int64)
+        # bincount, not np.add.at: the latter is slow on 400k-vertex meshes
+        np.cumsum(np.bincount(rows, minlength=n), out=xadj[1:])
+        return xadj, cols.astype(np.int64)

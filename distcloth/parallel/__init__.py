@@ -1,0 +1,1 @@
+"""Partitioning and per-rank layout; the only package that imports MPI (mpi4py)."""

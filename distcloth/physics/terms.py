@@ -1,0 +1,194 @@
+"""Force terms: one object per effect, each a stage of the step.
+
+A term sees local arrays (owned vertices first, then ghosts) and never a
+communicator.  Its contract:
+
+* ``stencils()``: element vertex lists whose blocks it writes, fixed for the
+  run, from which the matrix sparsity is built once;
+* ``bind(pattern)``: remember where its blocks go in the value array;
+* ``evaluate(x, v, force, want_jac)``: add its forces to ``force`` and keep
+  what the Jacobian needs; returns {"elastic_energy": .., "max_strain": ..}
+  contributions (energies already weighted so ranks sum to the total);
+* ``stiffness_product(w, out)``: out += (df/dx) w at the last evaluation;
+* ``add_to_system(data, alpha, beta)``: add its part of
+  A = M - beta df/dv - alpha df/dx to the block values;
+* ``energy(x)``: its potential energy only (diagnostics).
+
+Adding an effect means adding a term here and naming it in ``build_terms``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import FLEXION, SHEAR, STRUCTURAL
+from . import springs as sk
+
+
+class ForceTerm:
+    name = "force"
+    has_jacobian = True
+
+    def stencils(self):
+        return []
+
+    def bind(self, pattern):
+        pass
+
+    def evaluate(self, x, v, force, want_jac):
+        return {}
+
+    def stiffness_product(self, w, out):
+        pass
+
+    def add_to_system(self, data, alpha, beta):
+        pass
+
+    def energy(self, x):
+        return 0.0
+
+
+class SpringTerm(ForceTerm):
+    """Elastic springs of some kinds (membrane: structural + shear; bending: flexion)."""
+
+    def __init__(self, name, springs, rest, stiffness, weight, strain_mask, clamp=True):
+        self.name = name
+        self.springs = np.ascontiguousarray(springs, dtype=np.int64)
+        self.rest = np.ascontiguousarray(rest, dtype=np.float64)
+        self.k = np.ascontiguousarray(stiffness, dtype=np.float64)
+        self.weight = np.ascontiguousarray(weight, dtype=np.float64)
+        self.strain_mask = np.ascontiguousarray(strain_mask, dtype=np.bool_)
+        self.clamp = clamp
+        ns = self.springs.shape[0]
+        self.hess = np.zeros((ns, 3, 3))
+        self.unit = np.zeros((ns, 3))
+        self._zero_c = np.zeros(ns)
+        self.slots = None
+
+    def stencils(self):
+        return [self.springs]
+
+    def bind(self, pattern):
+        self.slots = pattern.slots_for(self.springs)
+
+    def evaluate(self, x, v, force, want_jac):
+        energy, strain = sk.spring_forces(x, v, self.springs, self.rest, self.k, self._zero_c,
+                                          self.weight, self.clamp, want_jac, force,
+                                          self.hess, self.unit, self.strain_mask)
+        return {"elastic_energy": energy, "max_strain": strain}
+
+    def stiffness_product(self, w, out):
+        sk.spring_stiffness_product(self.springs, self.hess, w, out)
+
+    def add_to_system(self, data, alpha, beta):
+        sk.add_spring_blocks(self.hess, self.unit, self._zero_c, alpha, 0.0, self.slots, data)
+
+    def energy(self, x):
+        return sk.spring_energy_only(x, self.springs, self.rest, self.k, self.weight)
+
+
+class SpringDampingTerm(ForceTerm):
+    """Damping along every spring on the relative velocity of its ends."""
+
+    def __init__(self, springs, rest, damping):
+        self.name = "force:damping"
+        self.springs = np.ascontiguousarray(springs, dtype=np.int64)
+        self.rest = np.ascontiguousarray(rest, dtype=np.float64)
+        self.c = np.ascontiguousarray(damping, dtype=np.float64)
+        ns = self.springs.shape[0]
+        self._zero = np.zeros(ns)
+        self._ones = np.ones(ns)
+        self._mask = np.zeros(ns, dtype=np.bool_)
+        self.hess = np.zeros((ns, 3, 3))
+        self.unit = np.zeros((ns, 3))
+        self.slots = None
+
+    def stencils(self):
+        return [self.springs]
+
+    def bind(self, pattern):
+        self.slots = pattern.slots_for(self.springs)
+
+    def evaluate(self, x, v, force, want_jac):
+        # zero stiffness: only the damping part of the spring force remains
+        sk.spring_forces(x, v, self.springs, self.rest, self._zero, self.c, self._zero,
+                         True, want_jac, force, self.hess, self.unit, self._mask)
+        return {}
+
+    def add_to_system(self, data, alpha, beta):
+        sk.add_spring_blocks(self.hess, self.unit, self.c, 0.0, beta, self.slots, data)
+
+
+class GravityTerm(ForceTerm):
+    name = "force:gravity"
+    has_jacobian = False
+
+    def __init__(self, mass, gravity, weight):
+        self.mg = mass[:, None] * np.asarray(gravity, dtype=np.float64)[None, :]
+        self.weight = weight          # 1 for owned vertices, 0 for ghosts
+
+    def evaluate(self, x, v, force, want_jac):
+        force += self.mg
+        return {}
+
+    def energy(self, x):
+        return -float(np.sum(self.weight * np.einsum("ij,ij->i", self.mg, x)))
+
+
+class DragTerm(ForceTerm):
+    """Linear air drag f = -drag * area * v on each vertex."""
+    name = "force:drag"
+
+    def __init__(self, area, drag, n_owned):
+        self.coef = drag * np.asarray(area, dtype=np.float64)
+        self.n_owned = n_owned
+        self.diag_slots = None
+
+    def bind(self, pattern):
+        self.diag_slots = pattern.diag_slots
+
+    def evaluate(self, x, v, force, want_jac):
+        force -= self.coef[:, None] * v
+        return {}
+
+    def add_to_system(self, data, alpha, beta):
+        d = beta * self.coef[: self.n_owned]
+        data[self.diag_slots, 0, 0] += d
+        data[self.diag_slots, 1, 1] += d
+        data[self.diag_slots, 2, 2] += d
+
+
+def build_terms(cfg, model, layout):
+    """The force terms a scene asks for, on this rank's local arrays, in stage order."""
+    local = layout.local_input
+    own = np.zeros(layout.n_local)
+    own[: layout.n_owned] = 1.0
+    ids = layout.local_spring_ids
+    lsp = layout.local_springs
+    # a spring counts once globally: each owned end carries half of it
+    spring_weight = 0.5 * ((lsp[:, 0] < layout.n_owned).astype(float)
+                           + (lsp[:, 1] < layout.n_owned).astype(float))
+    kind = model.spring_kind[ids]
+    terms = []
+    if cfg.has("gravity"):
+        terms.append(GravityTerm(model.vertex_mass[local], cfg.gravity, own))
+
+    def spring_term(name, kinds):
+        sel = np.isin(kind, kinds)
+        return SpringTerm(name, lsp[sel], model.spring_rest_length[ids][sel],
+                          model.spring_stiffness[ids][sel], spring_weight[sel],
+                          kind[sel] == STRUCTURAL)
+
+    if cfg.has("membrane"):
+        terms.append(spring_term("force:membrane", [STRUCTURAL, SHEAR]))
+    if cfg.has("bending"):
+        terms.append(spring_term("force:bending", [FLEXION]))
+    if cfg.has("damping"):
+        sel = model.spring_damping[ids] > 0.0
+        terms.append(SpringDampingTerm(lsp[sel], model.spring_rest_length[ids][sel],
+                                       model.spring_damping[ids][sel]))
+    if cfg.has("drag") and cfg.drag > 0.0:
+        terms.append(DragTerm(model.vertex_area[local], cfg.drag, layout.n_owned))
+    return terms
+
+
+FORCE_STAGES = ("force:gravity", "force:membrane", "force:bending", "force:damping", "force:drag")

@@ -1,0 +1,116 @@
+"""Run a scene end to end on every rank: check, set up, step, write.
+
+Error protocol (every rank takes the same path, so none waits forever):
+  * config errors are found before any output exists, by deterministic
+    code on every rank, and agreed at two check points -> exit 2;
+  * numerical failures (NaN, blow-up, solver failure) are agreed inside
+    ``Simulation.step`` -> the error is recorded in the file, the frames
+    already written stay, exit 1;
+  * anything unexpected is a bug -> traceback and MPI_Abort (in cli.py).
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+from .config.schema import ConfigError
+from .simulation import DIAGNOSTICS, STAGES, Progress, Simulation, SimulationError, log
+
+
+def _agree_config(comm, err: ConfigError | None):
+    from .config import format_config_error
+    agreed = comm.agree(format_config_error(err) if err is not None else None)
+    if agreed is not None:
+        if comm.rank == 0:
+            print(agreed[1], file=sys.stderr, flush=True)
+        return 2
+    return 0
+
+
+def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
+    """Build the model and the simulation; returns (sim, exit code)."""
+    from .scene import build_model
+    err = None
+    model = None
+    try:
+        model = build_model(cfg)
+    except ConfigError as exc:
+        err = exc
+    code = _agree_config(comm, err)
+    if code:
+        return None, code
+    sim = None
+    try:
+        sim = Simulation(cfg, model, comm, force_explicit=force,
+                         cmdline_options=cmdline_options, quiet=quiet)
+        sim.prepare()
+    except ConfigError as exc:
+        err = exc
+    code = _agree_config(comm, err)
+    if code:
+        return None, code
+    return sim, 0
+
+
+def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only=False,
+        quiet=False, progress=True) -> int:
+    t_start = time.perf_counter()
+    sim, code = setup(cfg, comm, force=force, cmdline_options=cmdline_options, quiet=quiet)
+    if code:
+        return code
+    if check_only:
+        log(comm, "check: the scene is valid")
+        sim.destroy()
+        return 0
+    from .io.h5writer import ResultWriter
+    path = output or cfg.output.file
+    h = cfg.time.step
+    n_steps = max(1, int(round(cfg.time.end / h)))
+    every = max(1, int(round(cfg.output.every / h)))
+    lay = sim.layout
+    attrs = {
+        "scene": cfg.scene, "ranks": comm.size, "integrator": cfg.time.integrator,
+        "time_step": h, "steps": n_steps, "output_every_steps": every,
+        "solver": sim.system.describe() if sim.system else "explicit",
+        "block_jacobi_blocks": int(comm.sum(__import__("numpy").array(
+            [sim.system.block_jacobi_blocks() if sim.system else 0]))[0]),
+        "rows_per_rank": [int(v) for v in 3 * (lay.ownership[1:] - lay.ownership[:-1])],
+        "edge_cut": lay.edge_cut, "imbalance": lay.imbalance, "cloth_size": sim.model.size(),
+    }
+    writer = ResultWriter(path, comm.mpi_comm if comm.under_mpiexec else None,
+                          rest_positions=sim.model.rest_positions, triangles=sim.model.triangles,
+                          owned_input=lay.owned_input, part=lay.part, config_text=cfg.source_text,
+                          attrs=attrs, stage_names=list(STAGES), diagnostic_names=list(DIAGNOSTICS))
+    log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
+    sim.pipeline.run("output", writer)
+    sim.pipeline.take_step_counters()
+    bar = Progress(comm, n_steps, enabled=progress and not quiet)
+    status, code = "completed", 0
+    try:
+        for k in range(1, n_steps + 1):
+            diag = sim.step()
+            if k % every == 0 or k == n_steps:
+                sim.pipeline.run("output", writer)
+            times, calls = sim.pipeline.take_step_counters()
+            writer.write_step(k, sim.time, diag, times, calls)
+            bar.update(k, sim.time)
+    except SimulationError as exc:
+        log(comm, f"stopped: {exc}")
+        writer.record_error(exc.step, str(exc))
+        status, code = "failed", 1
+    writer.close(status)
+    wall = time.perf_counter() - t_start
+    if not quiet:
+        log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
+        log(comm, f"{status} in {wall:.2f} s: {os.path.abspath(path)} "
+                  f"(+ {os.path.splitext(os.path.basename(path))[0]}.xdmf for ParaView)")
+    if cfg.output.preview and comm.rank == 0:
+        try:
+            from .io.preview import write_previews
+            for p in write_previews(path):
+                log(comm, f"preview: {os.path.abspath(p)}")
+        except Exception as exc:   # a picture must never turn a finished run into a failure
+            log(comm, f"preview failed: {exc}")
+    sim.destroy()
+    return code

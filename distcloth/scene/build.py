@@ -1,0 +1,160 @@
+"""SceneConfig -> Model: place every piece, wire its springs, lump its mass."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config.schema import ClothSpec, ConfigError, SceneConfig
+from ..model import FLEXION, SHEAR, STRUCTURAL, Model, PieceInfo
+from . import grid as gridlib
+from .meshio import MeshFormatError, read_mesh
+from .pins import select_pins
+from .placement import place
+from .springs import (check_triangle_mesh, flexion_stiffness, grid_spring_constants,
+                      mesh_springs, mesh_structural_stiffness, triangle_areas)
+
+_GRID_FAMILY_KIND = {"structural_u": STRUCTURAL, "structural_v": STRUCTURAL,
+                     "shear": SHEAR, "flexion_u": FLEXION, "flexion_v": FLEXION}
+
+
+@dataclass
+class _Piece:
+    positions: np.ndarray        # (n, 3) placed rest positions
+    triangles: np.ndarray        # (nt, 3) piece-local
+    vertex_area: np.ndarray      # (n,) lumped area
+    springs: np.ndarray          # (ns, 2) piece-local
+    stiffness: np.ndarray        # (ns,)
+    kind: np.ndarray             # (ns,) int8
+    pinned: np.ndarray           # piece-local
+    grid_resolution: tuple[int, int] | None
+
+
+def build_model(cfg: SceneConfig) -> Model:
+    """The Model of a scene: pieces concatenated in order (vertex and
+    triangle indices offset), pins as sorted unique global indices.
+
+    Lumped mass = density * vertex area.  Mesh files: a third of each
+    adjacent triangle.  Grids: a quarter of each adjacent cell, uniform over
+    the interior whatever the triangle pattern (a third of each triangle
+    would give the alternating pattern's 8- and 4-triangle vertices 4/3 and
+    2/3 of a cell, a checkerboard of masses the cloth does not have; for the
+    regular pattern the two agree on interior vertices).
+
+    The flexion springs' in-plane stiffness is taken off the grid structural
+    springs only when the ``bending`` effect is on: the membrane and bending
+    terms act on separate spring kinds (physics.terms), so with bending off
+    the structural springs alone must carry the membrane stiffness."""
+    if not cfg.cloth:
+        raise ConfigError("cloth", [], "at least one cloth piece")
+    bending_active = cfg.has("bending")
+    pieces = [_build_piece(p, spec, bending_active) for p, spec in enumerate(cfg.cloth)]
+
+    infos, vertex_start, triangle_start = [], 0, 0
+    for spec, piece in zip(cfg.cloth, pieces):
+        vertex_stop = vertex_start + piece.positions.shape[0]
+        triangle_stop = triangle_start + piece.triangles.shape[0]
+        infos.append(PieceInfo(spec.name, vertex_start, vertex_stop, triangle_start,
+                               triangle_stop, piece.grid_resolution))
+        vertex_start, triangle_start = vertex_stop, triangle_stop
+    offsets = [info.vertex_start for info in infos]
+
+    positions = np.concatenate([piece.positions for piece in pieces])
+    triangles = np.concatenate([piece.triangles + o for piece, o in zip(pieces, offsets)])
+    springs = np.concatenate([piece.springs + o for piece, o in zip(pieces, offsets)])
+    stiffness = np.concatenate([piece.stiffness for piece in pieces])
+    kind = np.concatenate([piece.kind for piece in pieces])
+    pinned = np.unique(np.concatenate([piece.pinned + o for piece, o in zip(pieces, offsets)]))
+    # c = damping * k along each spring (docs/config.md)
+    damping = np.concatenate([np.full(piece.springs.shape[0], spec.material.damping)
+                              for spec, piece in zip(cfg.cloth, pieces)]) * stiffness
+    vertex_area = np.concatenate([piece.vertex_area for piece in pieces])
+    vertex_mass = np.concatenate([spec.material.density * piece.vertex_area
+                                  for spec, piece in zip(cfg.cloth, pieces)])
+    rest_length = np.linalg.norm(positions[springs[:, 1]] - positions[springs[:, 0]], axis=1)
+
+    return Model(rest_positions=positions, triangles=triangles.astype(np.int64),
+                 vertex_mass=vertex_mass, vertex_area=vertex_area,
+                 spring_vertices=springs.astype(np.int64), spring_rest_length=rest_length,
+                 spring_stiffness=stiffness, spring_damping=damping,
+                 spring_kind=kind.astype(np.int8), pinned=pinned.astype(np.int64),
+                 pieces=infos, initial_positions=None)
+
+
+def _build_piece(p: int, spec: ClothSpec, bending_active: bool) -> _Piece:
+    key = f"cloth.{p}"
+    mesh = spec.mesh
+    if mesh.grid is not None:
+        piece = _grid_piece(spec, bending_active, key)
+    elif mesh.file is not None:
+        piece = _file_piece(spec, key)
+    else:
+        raise ConfigError(f"{key}.mesh", None, "exactly one of grid, file")
+    piece.pinned = select_pins(spec.pins, piece.positions, piece.grid_resolution, f"{key}.pins")
+    return piece
+
+
+def _grid_piece(spec: ClothSpec, bending_active: bool, key: str) -> _Piece:
+    grid = spec.mesh.grid
+    if grid.pattern not in gridlib.GRID_PATTERNS:
+        raise ConfigError(f"{key}.mesh.grid.pattern", grid.pattern,
+                          "one of " + " | ".join(gridlib.GRID_PATTERNS))
+    resolution = (int(grid.resolution[0]), int(grid.resolution[1]))
+    dx, dy = gridlib.grid_spacing(grid.size, resolution)
+    positions = place(gridlib.grid_vertices(grid.size, resolution),
+                      spec.mesh.rotation, spec.mesh.center)
+    families = gridlib.grid_springs(resolution)
+    constants = grid_spring_constants(
+        spec.material, dx, dy, key=f"{key}.material",
+        flexion_u=bending_active and families["flexion_u"].shape[0] > 0,
+        flexion_v=bending_active and families["flexion_v"].shape[0] > 0)
+    names = gridlib.GRID_SPRING_FAMILIES
+    counts = [families[name].shape[0] for name in names]
+    return _Piece(
+        positions=positions,
+        triangles=gridlib.grid_triangles(resolution, grid.pattern),
+        vertex_area=gridlib.grid_vertex_area(grid.size, resolution),
+        springs=np.concatenate([families[name] for name in names]),
+        stiffness=np.repeat([constants[name] for name in names], counts),
+        kind=np.repeat([_GRID_FAMILY_KIND[name] for name in names], counts).astype(np.int8),
+        pinned=np.zeros(0, dtype=np.int64), grid_resolution=resolution)
+
+
+def _triangle_lumped_area(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Each triangle gives a third of its area to each of its corners."""
+    corner_share = np.repeat(triangle_areas(positions, triangles) / 3.0, 3)
+    return np.bincount(triangles.ravel(), weights=corner_share, minlength=positions.shape[0])
+
+
+def _file_piece(spec: ClothSpec, key: str) -> _Piece:
+    """A triangle mesh from an OBJ / PLY file: unused vertices, degenerate,
+    repeated or non-manifold triangles are refused, not repaired, so that
+    vertex indices in pins mean what they mean in the file."""
+    mesh = spec.mesh
+    try:
+        vertices, triangles = read_mesh(mesh.file)
+        vertices = vertices * mesh.scale
+        check_triangle_mesh(vertices, triangles)
+        topology = mesh_springs(vertices, triangles)
+    except OSError as exc:
+        raise ConfigError(f"{key}.mesh.file", mesh.file,
+                          f"a readable OBJ or PLY file ({exc.strerror or exc})") from None
+    except MeshFormatError as exc:
+        raise ConfigError(f"{key}.mesh.file", mesh.file,
+                          f"an OBJ or PLY triangle mesh cloth can use: {exc}") from None
+    positions = place(vertices, mesh.rotation, mesh.center)
+    material = spec.material
+    edge_length = np.linalg.norm(vertices[topology.edges[:, 1]] - vertices[topology.edges[:, 0]],
+                                 axis=1)
+    flexion_length = np.linalg.norm(vertices[topology.flexion[:, 1]]
+                                    - vertices[topology.flexion[:, 0]], axis=1)
+    return _Piece(
+        positions=positions, triangles=triangles,
+        vertex_area=_triangle_lumped_area(vertices, triangles),
+        springs=np.concatenate([topology.edges, topology.flexion]),
+        stiffness=np.concatenate([
+            mesh_structural_stiffness(material.stretch, topology.edge_area, edge_length),
+            flexion_stiffness(material.bending, flexion_length)]),
+        kind=np.concatenate([np.full(topology.edges.shape[0], STRUCTURAL, dtype=np.int8),
+                             np.full(topology.flexion.shape[0], FLEXION, dtype=np.int8)]),
+        pinned=np.zeros(0, dtype=np.int64), grid_resolution=None)

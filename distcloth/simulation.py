@@ -1,0 +1,365 @@
+"""The SPMD driver: one Simulation per rank, stepping its own rows.
+
+Set-up (collective, before any output): METIS partition on rank 0 and
+broadcast, local layout, force terms, the block pattern (built once), the
+PETSc system and solver options (unused options refused), the explicit
+stability check.  Then each step runs the pipeline
+
+    kinematics -> constraints -> force:* -> assembly -> solve -> update
+    -> diagnostics -> output
+
+with errors (NaN, blow-up, solver failure) agreed collectively so every
+rank stops at the same step with the same message.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+from .config.schema import DEFAULT_SOLVER, ConfigError
+from .integrate import make_integrator
+from .linalg.constraints import Constraints, filter_system
+from .linalg.pattern import BlockPattern
+from .physics.terms import FORCE_STAGES, build_terms
+from .pipeline import Pipeline
+
+STAGES = ("kinematics", "constraints") + FORCE_STAGES + ("assembly", "solve", "update",
+                                                        "diagnostics", "output")
+DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_energy",
+               "total_energy", "max_strain", "max_speed", "newton_iterations",
+               "newton_residual", "ksp_iterations", "ksp_residual")
+MAX_SPEED = 1.0e3   # m/s: beyond this a cloth simulation has blown up
+
+
+class SimulationError(Exception):
+    """A run stopped on a numerical failure at a given step."""
+
+    def __init__(self, step: int, message: str):
+        self.step = step
+        super().__init__(f"step {step}: {message}")
+
+
+def log(comm, msg: str) -> None:
+    if comm.rank == 0:
+        print(f"[distcloth] {msg}", file=sys.stderr, flush=True)
+
+
+class Simulation:
+    def __init__(self, cfg, model, comm, *, force_explicit: bool = False,
+                 cmdline_options: set[str] | None = None, quiet: bool = False):
+        from .linalg.ghosts import GhostExchange
+        from .parallel.comm import partition_on_root
+        from .parallel.partition import build_layout, describe_partition
+
+        self.cfg, self.model, self.comm = cfg, model, comm
+        self.quiet = quiet
+        xadj, adjncy = model.matrix_graph()
+        part = partition_on_root(comm, xadj, adjncy)
+        self.layout = build_layout(xadj, adjncy, model.spring_vertices, part, comm.rank, comm.size)
+        self.say(describe_partition(self.layout))
+        lay = self.layout
+        self.n_owned, self.n_local = lay.n_owned, lay.n_local
+        local = lay.local_input
+        self.mass = model.vertex_mass[local].copy()
+        if np.any(self.mass[: self.n_owned] <= 0):
+            raise ConfigError("cloth", "mesh", "every vertex needs mass: a vertex belongs to no triangle")
+        self.x = model.start_positions()[local].astype(np.float64).copy()
+        self.v = model.start_velocities()[local].astype(np.float64).copy()
+        to_local = np.full(model.num_vertices, -1, dtype=np.int64)
+        to_local[local] = np.arange(self.n_local)
+        pl = to_local[model.pinned]
+        self.pinned_local = np.sort(pl[pl >= 0])
+        self.terms = build_terms(cfg, model, lay)
+        self.pattern = BlockPattern(self.n_owned, self.n_local,
+                                    [s for t in self.terms for s in t.stencils()])
+        for t in self.terms:
+            t.bind(self.pattern)
+        self.ghosts = GhostExchange(lay)
+        self.integrator = make_integrator(cfg)
+        self.system = None
+        if self.integrator.implicit:
+            from .linalg.system import LinearSystem
+            self.system = LinearSystem(lay, self.pattern, cfg.mat_type, cfg.warm_start,
+                                       cfg.pc_rebuild_every)
+        self.pipeline = self._build_pipeline()
+        self.accept_hooks = []      # callables(result) -> reason or None (a rejected step)
+        self.time = 0.0
+        self.step_index = 0
+        self.h = cfg.time.step
+        self._cmdline = cmdline_options or set()
+        self._inject = _nan_injection(comm.rank)
+        self._last = None
+        self.force_explicit = force_explicit
+
+    # ---------------------------------------------------------------- set-up
+    def say(self, msg):
+        if not self.quiet:
+            log(self.comm, msg)
+
+    def _build_pipeline(self) -> Pipeline:
+        p = Pipeline()
+        p.add("kinematics", self._kinematics)
+        p.add("constraints", self._constraints)
+        by_name = {t.name: t for t in self.terms}
+        for name in FORCE_STAGES:
+            term = by_name.get(name)
+            p.add(name, term.evaluate if term else None, enabled=term is not None)
+        p.add("assembly", self._assemble, enabled=self.integrator.implicit)
+        p.add("solve", self._solve, enabled=self.integrator.implicit)
+        p.add("update", self._update)
+        p.add("diagnostics", self._diagnostics)
+        p.add("output", self._output)
+        return p
+
+    def prepare(self) -> None:
+        """Collective checks before the first step: solver options, explicit stability."""
+        if self.system is not None:
+            from .linalg.petsc import insert_scene_options, unused_options
+            insert_scene_options(self.cfg.solver_options, self._cmdline)
+            self.forces(self.x, self.v, want_jac=True)
+            data = self.assemble(alpha=self.h ** 2, beta=self.h)
+            self.system.set_values(filter_system(self.pattern, data, np.zeros((self.n_owned, 3)),
+                                                 self._constraints())[0])
+            try:
+                self.system.configure()
+            except Exception as exc:   # PETSc error: a bad option value
+                raise ConfigError("solver", dict(self.cfg.solver_options), f"PETSc refused the solver set-up: {exc}")
+            for name in unused_options():
+                if DEFAULT_SOLVER.get(name, object()) == self.cfg.solver_options.get(name):
+                    continue   # a default the scene did not ask for (sub_pc_type with pc_type jacobi)
+                where = f"command line -distcloth_{name}" if name in self._cmdline else f"solver.{name}"
+                value = self.cfg.solver_options.get(name, "")
+                raise ConfigError(where, value, "not an option of the configured solver "
+                                  "(PETSc did not use it: misspelt, or for another solver type)")
+            self.say(f"solver: {self.system.describe()}")
+        else:
+            self.check_explicit_step()
+
+    def check_explicit_step(self) -> None:
+        """h < 0.9 * 2 / sqrt(lambda_max(M^-1 K)), lambda_max from Gershgorin (DESIGN.md §9)."""
+        lam = self.comm.max(np.array([self._gershgorin_local()]))[0]
+        kmax = self.comm.max(np.array([max((float(t.k.max()) for t in self.terms
+                                            if hasattr(t, "k") and t.k.size), default=0.0)]))[0]
+        mmin = -self.comm.max(np.array([-float(self.mass[: self.n_owned].min())]))[0]
+        limit = 0.9 * 2.0 / math.sqrt(lam) if lam > 0 else math.inf
+        seed = 0.4 * math.pi * math.sqrt(mmin / kmax) if kmax > 0 else math.inf
+        message = (f"explicit step limit: h < {limit:.4g} s (0.9*2/sqrt(lambda_max), Gershgorin); "
+                   f"seed 002 Eq. 4 gives {seed:.4g} s; h = {self.h:g} s")
+        if self.h >= limit and self.force_explicit:
+            log(self.comm, message + ": above the limit, running anyway because of --force")
+        else:
+            self.say(message)
+        if self.h >= limit and not self.force_explicit:
+            raise ConfigError("time.step", self.h,
+                              f"symplectic Euler is unstable above {limit:.4g} s for this cloth "
+                              f"(0.9*2/sqrt(lambda_max(M^-1 K))); use a smaller step, an implicit "
+                              f"integrator, or --force")
+
+    def _gershgorin_local(self) -> float:
+        """Row bound of M^-1 K at the rest state: each spring adds k to the
+        diagonal and k to one off-diagonal block norm of both its ends."""
+        rowsum = np.zeros(self.n_local)
+        for t in self.terms:
+            if hasattr(t, "k"):
+                for col in (0, 1):
+                    rowsum += np.bincount(t.springs[:, col], weights=2.0 * t.k, minlength=self.n_local)
+        return float(np.max(rowsum[: self.n_owned] / self.mass[: self.n_owned], initial=0.0))
+
+    # ---------------------------------------------------------- primitives
+    def forces(self, x, v, want_jac: bool) -> np.ndarray:
+        """Sum of the enabled force terms on every local row (each term is a stage)."""
+        f = np.zeros((self.n_local, 3))
+        info = {}
+        for name in FORCE_STAGES:
+            out = self.pipeline.run(name, x, v, f, want_jac)
+            if out:
+                for k, val in out.items():
+                    info[k] = max(info.get(k, 0.0), val) if k == "max_strain" else info.get(k, 0.0) + val
+        self._last = info
+        return f
+
+    def stiffness_product(self, w) -> np.ndarray:
+        out = np.zeros((self.n_local, 3))
+        for t in self.terms:
+            if t.has_jacobian and self.pipeline.enabled(t.name):
+                t.stiffness_product(w, out)
+        return out
+
+    def assemble(self, alpha: float, beta: float, gamma: float = 1.0) -> np.ndarray:
+        return self.pipeline.run("assembly", alpha, beta, gamma)
+
+    def _assemble(self, alpha, beta, gamma):
+        """Block values of A = gamma M - beta df/dv - alpha df/dx for the owned rows."""
+        data = self.pattern.new_values()
+        m = gamma * self.mass[: self.n_owned]
+        ds = self.pattern.diag_slots
+        for a in range(3):
+            data[ds, a, a] += m
+        for t in self.terms:
+            if t.has_jacobian:
+                t.add_to_system(data, alpha, beta)
+        return data
+
+    def solve(self, data, rhs, cons):
+        return self.pipeline.run("solve", data, rhs, cons)
+
+    def _solve(self, data, rhs, cons):
+        fdata, frhs = filter_system(self.pattern, data, rhs, cons)
+        self.system.set_values(fdata)
+        y, info = self.system.solve(frhs)
+        owned = cons.index < self.n_owned
+        y[cons.index[owned]] += cons.z[owned]
+        return y, info
+
+    def local_array(self, owned_rows: np.ndarray) -> np.ndarray:
+        a = np.zeros((self.n_local, owned_rows.shape[1]))
+        a[: self.n_owned] = owned_rows
+        self.ghosts.update(a)
+        return a
+
+    def project(self, cons, rows):
+        """S applied to the constrained owned rows of an (n_owned, 3) array."""
+        out = rows.copy()
+        owned = cons.index < self.n_owned
+        idx = cons.index[owned]
+        out[idx] = np.einsum("nij,nj->ni", cons.S[owned], rows[idx])
+        return out
+
+    def global_norm(self, rows) -> float:
+        return math.sqrt(self.comm.sum(np.array([float(np.sum(rows * rows))]))[0])
+
+    # ---------------------------------------------------------------- stages
+    def _kinematics(self, t_new):
+        """Prescribed velocities at t + h: static pins for now (moving pins and
+        colliders join here)."""
+        return np.zeros((self.pinned_local.size, 3))
+
+    def _constraints(self, target_velocity=None):
+        idx = self.pinned_local
+        if target_velocity is None:
+            target_velocity = np.zeros((idx.size, 3))
+        S = np.zeros((idx.size, 3, 3))
+        return Constraints(idx, S, target_velocity - self.v[idx])
+
+    def _update(self, result):
+        n = self.n_owned
+        self.x[:n] = result.x
+        self.v[:n] = result.v
+        if self._inject is not None and self.step_index == self._inject:
+            self.x[0] = np.nan
+        self.ghosts.update(self.x, self.v)
+
+    def _diagnostics(self, result) -> dict:
+        n = self.n_owned
+        m = self.mass[:n]
+        kinetic = 0.5 * float(np.sum(m * np.einsum("ij,ij->i", self.v[:n], self.v[:n])))
+        grav = elastic = 0.0
+        strain = 0.0
+        for t in self.terms:
+            if t.name == "force:gravity":
+                grav += t.energy(self.x)
+            elif t.has_jacobian and hasattr(t, "k"):
+                elastic += t.energy(self.x)
+                if t.name == "force:membrane" and t.springs.size:
+                    d = self.x[t.springs[:, 0]] - self.x[t.springs[:, 1]]
+                    st = (np.sqrt(np.einsum("ij,ij->i", d, d)) - t.rest) / t.rest
+                    strain = max(strain, float(np.max(st[t.strain_mask], initial=0.0)))
+        finite = bool(np.all(np.isfinite(self.x[:n])) and np.all(np.isfinite(self.v[:n])))
+        speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", self.v[:n], self.v[:n]), initial=0.0))) \
+            if finite else math.inf
+        sums = self.comm.sum(np.array([kinetic, grav, elastic, 0.0 if finite else 1.0]))
+        maxes = self.comm.max(np.array([strain, speed if math.isfinite(speed) else 1e300]))
+        return {
+            "step_size": self.h,
+            "kinetic_energy": sums[0], "gravitational_energy": sums[1], "elastic_energy": sums[2],
+            "total_energy": sums[0] + sums[1] + sums[2],
+            "max_strain": maxes[0], "max_speed": maxes[1],
+            "newton_iterations": result.newton_iterations, "newton_residual": result.newton_residual,
+            "ksp_iterations": result.ksp_iterations, "ksp_residual": result.ksp_residual,
+            "_nonfinite_ranks": sums[3],
+        }
+
+    def _output(self, writer):
+        writer.write_frame(self.step_index, self.time, self.x[: self.n_owned])
+
+    # ------------------------------------------------------------------ run
+    def owned_positions(self) -> np.ndarray:
+        return self.x[: self.n_owned]
+
+    def step(self) -> dict:
+        """Advance one step; returns the diagnostics.  Raises SimulationError on
+        every rank together."""
+        h = self.h
+        self.step_index += 1
+        k = self.step_index
+        target = self.pipeline.run("kinematics", self.time + h)
+        cons = self.pipeline.run("constraints", target)
+        error = None
+        result = None
+        try:
+            result = self.integrator.step(self, h, cons)
+        except Exception as exc:          # a solver failure is the same on all ranks,
+            error = f"{type(exc).__name__}: {exc}"   # a local bug is not: agree on it
+        agreed = self.comm.agree(error)
+        if agreed is not None:
+            raise SimulationError(k, agreed[1] + (f" (rank {agreed[0]})" if self.comm.size > 1 else ""))
+        for hook in self.accept_hooks:
+            reason = hook(result)
+            if reason:
+                raise SimulationError(k, f"step rejected: {reason}")
+        self.pipeline.run("update", result)
+        self.time = k * h
+        diag = self.pipeline.run("diagnostics", result)
+        if diag["_nonfinite_ranks"] > 0:
+            raise SimulationError(k, "NaN or Inf in positions or velocities")
+        if diag["max_speed"] > MAX_SPEED:
+            raise SimulationError(k, f"blow-up: a vertex moves at {diag['max_speed']:.3g} m/s "
+                                     f"(limit {MAX_SPEED:g} m/s)")
+        del diag["_nonfinite_ranks"]
+        return diag
+
+    def destroy(self):
+        if self.system is not None:
+            self.system.destroy()
+        self.ghosts.destroy()
+
+
+def _nan_injection(rank: int):
+    """Test hook: DISTCLOTH_INJECT_NAN=RANK:STEP poisons one position on that rank after that step."""
+    spec = os.environ.get("DISTCLOTH_INJECT_NAN")
+    if not spec:
+        return None
+    r, s = spec.split(":")
+    return int(s) if int(r) == rank else None
+
+
+class Progress:
+    """Rank 0's progress line with an ETA, at most once a second."""
+
+    def __init__(self, comm, total_steps: int, enabled: bool = True):
+        self.comm, self.total = comm, total_steps
+        self.enabled = enabled and comm.rank == 0
+        self.t0 = self.last = time.perf_counter()
+
+    def update(self, step: int, t: float):
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.last < 1.0 and step < self.total:
+            return
+        self.last = now
+        rate = step / max(now - self.t0, 1e-9)
+        eta = (self.total - step) / rate if rate > 0 else 0.0
+        print(f"[distcloth] step {step}/{self.total}  t = {t:.3f} s  {rate:.1f} steps/s  "
+              f"ETA {_hms(eta)}", file=sys.stderr, flush=True)
+
+
+def _hms(seconds: float) -> str:
+    seconds = int(round(seconds))
+    h, rem = divmod(seconds, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}h{m:02d}m{s:02d}s" if h else (f"{m}m{s:02d}s" if m else f"{s}s")

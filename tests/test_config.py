@@ -1,0 +1,352 @@
+"""Scene files -> SceneConfig: values, defaults, overrides and the exact
+one-line errors of docs/config.md."""
+import copy
+import dataclasses
+
+import pytest
+import yaml
+
+from distcloth.config import (ConfigError, SceneConfig, config_from_dict, format_config_error,
+                              load_config)
+from distcloth.config.load import apply_overrides
+from distcloth.config.schema import (ClothSpec, GridSpec, MaterialSpec, MeshSpec, OutputSpec,
+                                     PinSpec, TimeSpec)
+
+FULL_SCENE = """\
+scene: hanging_square
+cloth:
+  - name: square
+    mesh:
+      grid: {size: [0.5, 0.25], resolution: [51, 26], pattern: regular}
+      center: [0, 0, 1.0]
+      rotation: [90, 0, 0]
+    pins:
+      - edge: top
+      - corner: top_left
+      - indices: [0, 17]
+      - box: {min: [-1, -1, 0.9], max: [1, 1, 1.1]}
+    material: {model: mass_spring, density: 0.2, stretch: 12, shear: 3.0,
+               bending: 2.0e-6, damping: 0.01}
+  - name: shirt
+    mesh: {file: meshes/shirt.OBJ, scale: 2}
+    pins: [{indices: [5]}]
+effects: [gravity, membrane, drag]
+gravity: [0, 0, -9.8]
+drag: 0.5
+time: {end: 2.0, step: 1e-2, integrator: symplectic_euler, newton_iterations: 3,
+       newton_tolerance: 1.0e-6}
+solver: {ksp_type: gmres, ksp_rtol: 1e-8, ksp_max_it: 50, ksp_monitor: true, mat_type: aij}
+output: {file: out/./hanging.h5, every: 0.1, preview: false}
+"""
+
+
+def grid_piece(**extra) -> dict:
+    return {"mesh": {"grid": {"size": [1, 1], "resolution": [2, 2]}}, **extra}
+
+
+def base_scene() -> dict:
+    """A small valid scene as raw data: one 2x2 grid piece and a file piece."""
+    return {"cloth": [grid_piece(name="a"), {"name": "b", "mesh": {"file": "m.obj"}}],
+            "time": {"end": 1.0, "step": 0.01}}
+
+
+def set_path(raw: dict, path: str, value) -> dict:
+    """``raw`` with the value at a dotted path replaced (test-side, independent
+    of the loader's override code)."""
+    *parents, last = [int(p) if p.isdigit() else p for p in path.split(".")]
+    node = raw
+    for part in parents:
+        node = node[part]
+    node[last] = value
+    return raw
+
+
+def error_line(raw: dict, base_dir) -> str:
+    with pytest.raises(ConfigError) as caught:
+        config_from_dict(raw, str(base_dir), "scene.yaml")
+    return format_config_error(caught.value)
+
+
+@pytest.fixture
+def scene_dir(tmp_path):
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "shirt.OBJ").write_text("v 0 0 0\n")
+    (tmp_path / "m.obj").write_text("v 0 0 0\n")
+    (tmp_path / "m.stl").write_text("")
+    (tmp_path / "hanging.yaml").write_text(FULL_SCENE)
+    return tmp_path
+
+
+def test_full_scene_gives_the_written_values(scene_dir):
+    config = load_config(str(scene_dir / "hanging.yaml"))
+    expected = SceneConfig(
+        scene="hanging_square",
+        cloth=(
+            ClothSpec(
+                name="square",
+                mesh=MeshSpec(grid=GridSpec((0.5, 0.25), (51, 26), "regular"),
+                              center=(0.0, 0.0, 1.0), rotation=(90.0, 0.0, 0.0)),
+                pins=(PinSpec(edge="top"), PinSpec(corner="top_left"), PinSpec(indices=(0, 17)),
+                      PinSpec(box_min=(-1.0, -1.0, 0.9), box_max=(1.0, 1.0, 1.1))),
+                material=MaterialSpec("mass_spring", 0.2, 12.0, 3.0, 2.0e-6, 0.01)),
+            ClothSpec(name="shirt",
+                      mesh=MeshSpec(file=str(scene_dir / "meshes" / "shirt.OBJ"), scale=2.0),
+                      pins=(PinSpec(indices=(5,)),)),
+        ),
+        effects=("gravity", "membrane", "drag"),
+        gravity=(0.0, 0.0, -9.8),
+        drag=0.5,
+        time=TimeSpec(2.0, 0.01, "symplectic_euler", 3, 1.0e-6),
+        solver=(("ksp_type", "gmres"), ("pc_type", "bjacobi"), ("sub_pc_type", "sor"),
+                ("ksp_rtol", 1e-8), ("ksp_max_it", 50), ("ksp_monitor", True)),
+        mat_type="aij",
+        output=OutputSpec(file="out/hanging.h5", every=0.1, preview=False),
+    )
+    assert dataclasses.replace(config, source_text="") == expected
+    assert all(type(x) is float for x in config.gravity + config.cloth[0].mesh.grid.size)
+    assert config.cloth[0].material.shear_stiffness == 3.0
+
+
+def test_defaults_fill_everything_not_given(tmp_path):
+    config = config_from_dict({"cloth": {"mesh": {"grid": {"size": [1, 2], "resolution": [3, 4]}}}},
+                              str(tmp_path), "some/dir/drape.yaml")
+    assert dataclasses.replace(config, source_text="") == SceneConfig(
+        scene="drape",
+        cloth=(ClothSpec(name="piece0", mesh=MeshSpec(grid=GridSpec((1.0, 2.0), (3, 4)))),))
+    assert config.cloth[0].mesh.grid.pattern == "alternating"
+    assert config.cloth[0].material.shear_stiffness == 1.0
+    assert config.solver_options == {"ksp_type": "cg", "pc_type": "bjacobi",
+                                      "sub_pc_type": "sor", "ksp_rtol": 1e-5}
+
+
+def test_null_sections_mean_defaults(tmp_path):
+    raw = {"cloth": [grid_piece(material=None, pins=None)],
+           "time": None, "solver": None, "output": None, "effects": None}
+    config = config_from_dict(raw, str(tmp_path), "x.yaml")
+    assert config.time == TimeSpec() and config.output == OutputSpec()
+    assert config.cloth[0].material == MaterialSpec() and config.cloth[0].pins == ()
+
+
+def test_yaml_anchors_and_merge_keys_still_work(tmp_path):
+    path = tmp_path / "merge.yaml"
+    path.write_text("cloth:\n"
+                    "  - {name: a, mesh: {grid: &g {size: [1, 1], resolution: [2, 2]}}}\n"
+                    "  - {name: b, mesh: {grid: {<<: *g, resolution: [3, 3]}}}\n")
+    config = load_config(str(path))
+    assert [piece.mesh.grid.resolution for piece in config.cloth] == [(2, 2), (3, 3)]
+
+
+@pytest.mark.parametrize("text, value", [("1e-5", 1e-5), ("2E3", 2000.0), ("-15e-1", -1.5)])
+def test_float_strings_are_accepted_where_floats_are_wanted(tmp_path, text, value):
+    # PyYAML reads 1e-5 (no dot) as a string
+    raw = yaml.safe_load(f"cloth: {{mesh: {{grid: {{size: [1, 1], resolution: [2, 2]}}}}}}\n"
+                         f"gravity: [0, 0, {text}]\n")
+    assert isinstance(raw["gravity"][2], str)
+    assert config_from_dict(raw, str(tmp_path), "x.yaml").gravity == (0.0, 0.0, value)
+
+
+def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
+    config = load_config(str(scene_dir / "hanging.yaml"), ["time.end=3"])
+    assert "\n" in config.source_text and "end: 3.0" in config.source_text
+    again = config_from_dict(yaml.safe_load(config.source_text), "/", "elsewhere.yaml")
+    assert again == config
+
+
+THE_EFFECTS = "one of gravity | membrane | bending | damping | drag"
+TIME_KEYS = "end, step, integrator, newton_iterations, newton_tolerance"
+
+# (key path set on base_scene(), value, the expected line after 'config error: ')
+ERRORS = [
+    ("cloth.1.mesh.file", "missing.obj",
+     "cloth.1.mesh.file: 'missing.obj' — an existing .obj or .ply file "
+     "(not found: {dir}/missing.obj)"),
+    ("cloth.1.mesh.file", "m.stl", "cloth.1.mesh.file: 'm.stl' — an existing .obj or .ply file"),
+    ("cloth.0.material", {"density": -0.1},
+     "cloth.0.material.density: -0.1 — a finite number > 0"),
+    ("cloth.0.material", {"shear": -1}, "cloth.0.material.shear: -1 — a finite number >= 0"),
+    ("cloth.0.material", {"model": "fem"}, "cloth.0.material.model: 'fem' — one of mass_spring"),
+    ("cloth.0.material", {"stretch": True},
+     "cloth.0.material.stretch: true — a finite number > 0"),
+    ("effects", ["gravity", "wind"], f"effects.1: 'wind' — {THE_EFFECTS}"),
+    ("effects", ["drag", "drag"], "effects.1: 'drag' — each effect at most once"),
+    ("effects", "gravity", "effects: 'gravity' — a list of effect names: gravity, membrane, "
+                           "bending, damping, drag"),
+    ("time", {"stepp": 0.01},
+     f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
+    ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
+                      "gravity, drag, time, solver, output"),
+    ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
+    ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
+    ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
+    ("time", {"integrator": "rk4"},
+     "time.integrator: 'rk4' — one of backward_euler | symplectic_euler"),
+    ("time", {"newton_iterations": 0}, "time.newton_iterations: 0 — an integer >= 1 and <= 100"),
+    ("time", {"newton_iterations": 2.0},
+     "time.newton_iterations: 2.0 — an integer >= 1 and <= 100"),
+    ("drag", float("nan"), "drag: nan — a finite number >= 0"),
+    ("gravity", [0, -9.81], "gravity: [0, -9.81] — a list of 3 numbers"),
+    ("cloth.0.mesh.grid.resolution", [2.0, 2],
+     "cloth.0.mesh.grid.resolution.0: 2.0 — an integer >= 2"),
+    ("cloth.0.mesh.grid.size", [1, 0], "cloth.0.mesh.grid.size.1: 0 — a finite number > 0"),
+    ("cloth.0.mesh.grid", {"size": [1, 1]},
+     "cloth.0.mesh.grid.resolution: null — required: [nu, nv] vertices"),
+    ("cloth.0.mesh.grid.pattern", "random",
+     "cloth.0.mesh.grid.pattern: 'random' — one of regular | alternating"),
+    ("cloth.0.mesh.scale", 2, "cloth.0.mesh.scale: 2 — only for file meshes"),
+    ("cloth.1.mesh.grid", {"size": [1, 1], "resolution": [2, 2]},
+     "cloth.1.mesh: {file: 'm.obj', grid: {size: [1, 1], resolution: [2, 2]}}"
+     " — exactly one of grid, file"),
+    ("cloth.1.pins", [{"edge": "top"}],
+     "cloth.1.pins.0.edge: 'top' — edge pins only on grid meshes; use indices or box"),
+    ("cloth.0.pins", [{"corner": "top"}],
+     "cloth.0.pins.0.corner: 'top' — one of bottom_left | bottom_right | top_left | top_right"),
+    ("cloth.0.pins", [{"edge": "top", "corner": "top_left"}],
+     "cloth.0.pins.0: {edge: 'top', corner: 'top_left'}"
+     " — exactly one of edge, corner, indices, box"),
+    ("cloth.0.pins", [{"edge": "left"}, {"indices": [0, 4]}],
+     "cloth.0.pins.1.indices.1: 4 — a vertex index 0 <= i < 4 (the grid's vertex count)"),
+    ("cloth.1.pins", [{"indices": [-1]}], "cloth.1.pins.0.indices.0: -1 — an integer >= 0"),
+    ("cloth.0.pins", [{"box": {"min": [0, 0, 1], "max": [1, 1, 0]}}],
+     "cloth.0.pins.0.box: {min: [0, 0, 1], max: [1, 1, 0]} — min <= max in every component"),
+    ("cloth.1.name", "a", "cloth.1.name: 'a' — a name no other piece has (cloth.0 has it)"),
+    ("cloth", [], "cloth: [] — a non-empty list of cloth pieces"),
+    ("cloth", None, "cloth: null — a non-empty list of cloth pieces"),
+    ("output", {"every": 0.001},
+     "output.every: 0.001 — a number >= time.step (0.01): "
+     "frames cannot be more frequent than steps"),
+    ("output", {"file": "out/result.csv"},
+     "output.file: 'out/result.csv' — a file name ending in .h5 or .hdf5"),
+    ("output", {"preview": "yes"}, "output.preview: 'yes' — true or false"),
+    ("solver", {"-ksp_rtol": 1e-8},
+     "solver.-ksp_rtol: 1e-08 — a PETSc option without the leading '-': write ksp_rtol"),
+    ("solver", {"distcloth_ksp_rtol": 1e-8},
+     "solver.distcloth_ksp_rtol: 1e-08 — a PETSc option without the prefix distcloth_ "
+     "(distcloth adds it): write ksp_rtol"),
+    ("solver", {"KSP_type": "cg"}, "solver.KSP_type: 'cg' — a PETSc option name: lower-case "
+                                   "letters, digits and _, starting with a letter"),
+    ("solver", {"ksp_type": ["cg"]},
+     "solver.ksp_type: ['cg'] — a string, a finite number or a boolean"),
+    ("solver", {"mat_type": "dense"}, "solver.mat_type: 'dense' — one of baij | aij"),
+]
+
+
+@pytest.mark.parametrize("path, value, expected", ERRORS, ids=[e[2].split(":")[0] for e in ERRORS])
+def test_each_bad_value_names_its_key_path(scene_dir, path, value, expected):
+    raw = set_path(base_scene(), path, value)
+    assert error_line(raw, scene_dir) == ("distcloth: config error: "
+                                          + expected.replace("{dir}", str(scene_dir)))
+
+
+def test_a_grid_pin_edge_is_fine_on_a_grid_but_not_on_a_file(scene_dir):
+    raw = set_path(base_scene(), "cloth.0.pins", [{"edge": "top"}, {"indices": [3]}])
+    config = config_from_dict(raw, str(scene_dir), "x.yaml")
+    assert config.cloth[0].pins == (PinSpec(edge="top"), PinSpec(indices=(3,)))
+
+
+def test_overrides_are_applied_and_checked(scene_dir):
+    config = load_config(str(scene_dir / "hanging.yaml"), [
+        "time.step=0.05", "cloth.0.material.stretch=20", "cloth.1.pins.0.indices=[1, 2]",
+        "solver.ksp_rtol=1e-10", "solver.pc_factor_levels=2", "gravity.2=-1",
+        "output.preview=true", "scene=other"])
+    assert config.time.step == 0.05
+    assert config.cloth[0].material.stretch == 20.0
+    assert config.cloth[1].pins == (PinSpec(indices=(1, 2)),)
+    assert config.solver_options["ksp_rtol"] == 1e-10
+    assert config.solver_options["pc_factor_levels"] == 2
+    assert config.gravity == (0.0, 0.0, -1.0)
+    assert config.output.preview is True and config.scene == "other"
+
+
+def test_overrides_start_absent_sections_and_address_a_single_piece(tmp_path):
+    raw = {"cloth": grid_piece()}
+    result = apply_overrides(raw, ["time.end=5", "cloth.0.name=sheet"])
+    assert result == {"cloth": [{**grid_piece(), "name": "sheet"}], "time": {"end": 5}}
+    assert raw == {"cloth": grid_piece()}     # the input is left alone
+
+
+TIME_ALLOWED = f"no such key; allowed under time: {TIME_KEYS}"
+
+OVERRIDE_ERRORS = [
+    ("time.stepp=0.1", f"time.stepp: 0.1 — {TIME_ALLOWED}"),
+    ("nosuch.key=1", "nosuch.key: 1 — no such key; allowed under the top level: scene, cloth, "
+                     "effects, gravity, drag, time, solver, output"),
+    ("cloth.2.name=x", "cloth.2.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
+    ("cloth.first.name=x", "cloth.first.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
+    ("cloth.0.pins.0.edge=top", "cloth.0.pins.0.edge: 'top' — cloth.0.pins is not in the "
+                                "scene: set it whole"),
+    ("cloth.0.mesh.grid.size.x=1", "cloth.0.mesh.grid.size.x: 1 — an index 0 <= i < 2: "
+                                   "cloth.0.mesh.grid.size has 2 element(s)"),
+    ("solver.ksp_rtol.x=1", "solver.ksp_rtol.x: 1 — solver options take single values"),
+    ("drag.0=1", "drag.0: 1 — drag is not in the scene: set it whole"),
+    ("time.step", "--set: 'time.step' — key.path=value, e.g. time.step=0.01"),
+    ("time.step=[1", "time.step: '[1' — a YAML value (expected ',' or ']', but got "
+                     "'<stream end>')"),
+    ("time..step=1", "--set: 'time..step=1' — key.path=value, e.g. time.step=0.01"),
+    ("time.step=fast", "time.step: 'fast' — a finite number > 0"),
+    ("cloth.0.material.density=-2", "cloth.0.material.density: -2 — a finite number > 0"),
+    ("cloth.1.pins.0={edge: top}",
+     "cloth.1.pins.0.edge: 'top' — edge pins only on grid meshes; use indices or box"),
+]
+
+
+@pytest.mark.parametrize("override, expected", OVERRIDE_ERRORS,
+                         ids=[o[0] for o in OVERRIDE_ERRORS])
+def test_bad_overrides_name_their_path(scene_dir, override, expected):
+    raw = set_path(base_scene(), "cloth.1.pins", [{"indices": [0]}])
+    with pytest.raises(ConfigError) as caught:
+        config_from_dict(apply_overrides(raw, [override]), str(scene_dir), "x.yaml")
+    assert format_config_error(caught.value) == "distcloth: config error: " + expected
+
+
+NOT_A_MAPPING = ("null — a YAML mapping with keys scene, cloth, effects, gravity, drag, time, "
+                 "solver, output")
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("cloth: [a\n", "\"expected ',' or ']', but got '<stream end>'\" — valid YAML "
+                    "(error at line 2, column 1)"),
+    ("", NOT_A_MAPPING),
+    ("# all commented out\n", NOT_A_MAPPING),
+    ("[1, 2]\n", NOT_A_MAPPING.replace("null", "[1, 2]")),
+    ("time: {end: 1}\ntime: {step: 1}\n",
+     "'found duplicate key time' — valid YAML (error at line 2, column 1)"),
+])
+def test_a_file_that_is_not_a_yaml_mapping_is_named(tmp_path, text, expected):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as caught:
+        load_config(str(path))
+    assert format_config_error(caught.value) == f"distcloth: config error: {path}: {expected}"
+
+
+def test_a_missing_scene_file_is_named(tmp_path):
+    with pytest.raises(ConfigError) as caught:
+        load_config(str(tmp_path / "none.yaml"))
+    assert format_config_error(caught.value) == (
+        f"distcloth: config error: {tmp_path}/none.yaml: 'No such file or directory'"
+        " — a readable YAML scene file")
+
+
+@pytest.mark.parametrize("value, shown", [
+    ("two\nlines", "'two\\nlines'"),
+    (list(range(100)), "[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, …"),
+    ({"a": None, "b": [True, 1.5]}, "{a: null, b: [true, 1.5]}"),
+])
+def test_the_error_is_one_short_line(value, shown):
+    line = format_config_error(ConfigError("time.step", value, "a\nnumber"))
+    assert line == f"distcloth: config error: time.step: {shown} — a number"
+    assert "\n" not in line and len(line) < 130
+
+
+def test_a_self_referencing_value_still_formats():
+    loop: list = []
+    loop.append(loop)
+    line = format_config_error(ConfigError("effects", loop, "a list"))
+    assert line.startswith("distcloth: config error: effects: [[[[") and line.endswith("— a list")
+
+
+def test_the_raw_input_is_not_modified(scene_dir):
+    raw = base_scene()
+    before = copy.deepcopy(raw)
+    config_from_dict(raw, str(scene_dir), "x.yaml")
+    assert raw == before

@@ -1,0 +1,518 @@
+"""Result file, XDMF sidecar, previews and read-back (distcloth.io).
+
+Written for ``mpiexec -n 2 python -m pytest``: every writer test is collective
+(all ranks write their own rows of one shared file, whose path rank 0 picks
+and broadcasts) and rank 0 alone reads the file back with plain h5py and
+checks it against the synthetic global arrays, which every rank generates
+identically from a fixed seed.  Also passes on one rank.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+import xml.etree.ElementTree as ET
+
+import h5py
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from distcloth.io import CollectiveError, ResultWriter, check_xdmf, read_result, write_previews
+from distcloth.io import h5writer
+
+COMM = MPI.COMM_WORLD
+RANK, SIZE = COMM.rank, COMM.size
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+DIAGS = ["kinetic_energy", "gravitational_energy", "elastic_energy", "total_energy",
+         "ksp_iterations", "newton_iterations"]
+STAGES = ["forces", "assemble", "solve"]
+
+
+# ---------------------------------------------------------------- helpers
+
+@pytest.fixture
+def shared_dir(tmp_path):
+    """A directory every rank agrees on (rank 0's tmp_path)."""
+    return COMM.bcast(str(tmp_path) if RANK == 0 else None, root=0)
+
+
+def blocky_partition(n: int, size: int, seed: int = 3, max_block: int = 60) -> np.ndarray:
+    """Runs of random length (1..max_block) given to random ranks: owned rows
+    are scattered through the input order, as with METIS."""
+    rng = np.random.default_rng(seed)
+    lengths = rng.integers(1, max_block + 1, size=n)
+    cuts = np.cumsum(lengths)
+    cuts = cuts[cuts < n]
+    block_rank = rng.integers(0, size, size=cuts.size + 1)
+    block_rank[:size] = np.arange(size)     # every rank owns something
+    return np.repeat(block_rank, np.diff(np.r_[0, cuts, n])).astype(np.int32)
+
+
+class Synthetic:
+    """A run everyone can regenerate: mesh, frames, steps, all from one seed."""
+
+    def __init__(self, n=1000, frames=4, steps_per_frame=5, seed=11, part=None):
+        rng = np.random.default_rng(seed)
+        self.n = n
+        self.rest = rng.random((n, 3))
+        self.triangles = rng.integers(0, n, size=(2 * n - 3, 3)).astype(np.int64)
+        self.part = blocky_partition(n, SIZE) if part is None else part
+        self.frames = rng.standard_normal((frames, n, 3))
+        self.frame_step = (np.arange(frames) + 1) * steps_per_frame - 1
+        self.frame_time = 0.01 * (self.frame_step + 1)
+        nsteps = frames * steps_per_frame
+        self.step = np.arange(nsteps)
+        self.time = 0.01 * (self.step + 1)
+        self.diag = {k: rng.standard_normal(nsteps) for k in DIAGS}
+        self.stage_time = {k: rng.random(nsteps) for k in STAGES}
+        self.stage_calls = {k: rng.integers(0, 5, nsteps) for k in STAGES}
+        self.steps_per_frame = steps_per_frame
+        # this rank's vertices in a scrambled local order, like a LocalLayout
+        mine = np.flatnonzero(self.part == RANK)
+        self.owned = np.random.default_rng(100 + RANK).permutation(mine)
+        self.config = "scene: test\ncloth: {name: tablecloth}\n# ünïcode\n"
+        self.attrs = {"scene": "synthetic", "ranks": SIZE, "integrator": "backward_euler",
+                      "ksp_rtol": 1e-8, "verbose": False, "resolution": [40, 25]}
+
+    def writer(self, path, comm=COMM, **kw):
+        return ResultWriter(path, comm, rest_positions=self.rest, triangles=self.triangles,
+                            owned_input=self.owned, part=self.part, config_text=self.config,
+                            attrs=self.attrs, stage_names=STAGES, diagnostic_names=DIAGS, **kw)
+
+    def write_steps(self, w, frame):
+        for s in range(frame * self.steps_per_frame, (frame + 1) * self.steps_per_frame):
+            w.write_step(int(self.step[s]), float(self.time[s]),
+                         {k: v[s] for k, v in self.diag.items()},
+                         {k: v[s] for k, v in self.stage_time.items()},
+                         {k: int(v[s]) for k, v in self.stage_calls.items()})
+
+    def write_frame(self, w, k):
+        w.write_frame(int(self.frame_step[k]), float(self.frame_time[k]), self.frames[k][self.owned])
+
+    def write_run(self, w, frames=None):
+        for k in range(self.frames.shape[0] if frames is None else frames):
+            self.write_steps(w, k)
+            self.write_frame(w, k)
+
+
+def on_root(check):
+    """Run ``check`` on rank 0, then share its outcome so every rank passes or fails."""
+    err = None
+    if RANK == 0:
+        try:
+            check()
+        except BaseException as e:   # noqa: BLE001 - re-raised below on every rank
+            err = e
+    failed = COMM.bcast(None if err is None else repr(err), root=0)
+    if err is not None:
+        raise err
+    if failed is not None:
+        pytest.fail(f"rank 0 failed: {failed}")
+
+
+def clean_env() -> dict:
+    """Environment for a serial child: no trace of the MPI launch."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
+    env["PYTHONPATH"] = REPO + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("H5PY_ALWAYS_USE_MPI", None)
+    return env
+
+
+# ---------------------------------------------------------------- round trip
+
+@pytest.mark.parametrize("step_buffer", [3, 1024])
+def test_round_trip_in_input_order(shared_dir, step_buffer):
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "sub", "run.h5")       # parent made by the writer
+    with syn.writer(path, step_buffer=step_buffer) as w:
+        syn.write_run(w)
+    assert w.closed
+
+    def check():
+        r = read_result(path)
+        assert r["frames_written"] == 4 and r["steps_written"] == 20
+        assert r["positions"].shape == (4, syn.n, 3)
+        assert np.array_equal(r["positions"], syn.frames)        # exactly, input order
+        assert np.array_equal(r["time"], syn.frame_time)
+        assert np.array_equal(r["step"], syn.frame_step)
+        assert np.array_equal(r["rest_positions"], syn.rest)
+        assert np.array_equal(r["triangles"], syn.triangles)
+        assert np.array_equal(r["part"], syn.part)
+        assert r["config"] == syn.config
+        assert np.array_equal(r["diagnostics"]["step"], syn.step)
+        assert np.array_equal(r["diagnostics"]["time"], syn.time)
+        for k in DIAGS:
+            assert np.array_equal(r["diagnostics"][k], syn.diag[k]), k
+        for k in STAGES:
+            assert np.array_equal(r["stage_time"][k], syn.stage_time[k]), k
+            assert np.array_equal(r["stage_calls"][k], syn.stage_calls[k]), k
+        a = r["attrs"]
+        assert a["status"] == "completed" and a["error"] == "" and a["error_step"] == -1
+        assert a["scene"] == "synthetic" and a["ranks"] == SIZE and a["ksp_rtol"] == 1e-8
+        assert list(a["resolution"]) == [40, 25] and a["verbose"] is False
+        with h5py.File(path, "r") as f:
+            pos = f["frames/positions"]
+            assert pos.dtype == np.float64 and pos.maxshape == (None, syn.n, 3)
+            assert pos.chunks == (1, syn.n, 3)
+            assert f["frames/step"].dtype == np.int64
+            assert f["partition/part"].dtype == np.int32
+            assert f["mesh/triangles"].dtype == np.int64
+            assert f["diagnostics/stage_calls/solve"].dtype == np.int64
+            assert all(f[f"diagnostics/{k}"].maxshape == (None,) for k in DIAGS)
+
+    on_root(check)
+
+
+def test_missing_values_are_nan_and_unknown_names_raise(shared_dir):
+    syn = Synthetic(frames=2)
+    path = os.path.join(shared_dir, "partial.h5")
+    w = syn.writer(path, step_buffer=2)
+    full = {k: 1.0 for k in DIAGS}
+    w.write_step(0, 0.1, full, {k: 0.5 for k in STAGES}, {k: 3 for k in STAGES})
+    w.write_step(1, 0.2, full, {k: 0.5 for k in STAGES}, {k: 3 for k in STAGES})  # buffer full
+    w.write_step(2, 0.3, {"kinetic_energy": 2.0}, {"solve": 0.25}, {"solve": 4})
+    with pytest.raises(KeyError, match="unknown diagnostic"):
+        w.write_step(3, 0.4, {"not_declared": 1.0})
+    w.write_frame(2, 0.3, syn.frames[0][syn.owned])
+    w.write_step(3, 0.4, {"elastic_energy": 5.0})
+    w.close()
+
+    def check():
+        r = read_result(path)
+        d, st, sc = r["diagnostics"], r["stage_time"], r["stage_calls"]
+        assert r["steps_written"] == 4
+        assert np.array_equal(d["step"], [0, 1, 2, 3])
+        assert np.array_equal(d["kinetic_energy"][:3], [1.0, 1.0, 2.0]) and np.isnan(d["kinetic_energy"][3])
+        assert np.isnan(d["elastic_energy"][2]) and d["elastic_energy"][3] == 5.0
+        assert np.array_equal(sc["forces"], [3, 3, 0, 0]) and np.array_equal(sc["solve"], [3, 3, 4, 0])
+        assert np.isnan(st["forces"][2]) and st["solve"][2] == 0.25 and np.isnan(st["solve"][3])
+
+    on_root(check)
+
+
+@pytest.mark.skipif(SIZE < 2, reason="needs a rank that owns nothing")
+def test_rank_owning_nothing_takes_part(shared_dir):
+    syn = Synthetic(part=np.zeros(1000, np.int32))     # everything on rank 0
+    path = os.path.join(shared_dir, "empty_rank.h5")
+    w = syn.writer(path)
+    assert w.selection_kind == ("hyperslab" if RANK == 0 else "none")
+    syn.write_run(w)
+    w.close()
+    on_root(lambda: np.testing.assert_array_equal(read_result(path)["positions"], syn.frames))
+
+
+def test_point_and_hyperslab_selections_mix(shared_dir, monkeypatch):
+    """Above MAX_HYPERSLAB_RUNS a rank selects its rows as points; here rank 0
+    does and the others use hyperslabs, in the same collective writes."""
+    monkeypatch.setattr(h5writer, "MAX_HYPERSLAB_RUNS", 0 if RANK == 0 else 10**6)
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "points.h5")
+    w = syn.writer(path)
+    assert w.selection_kind == ("points" if RANK == 0 else "hyperslab")
+    mine = np.sort(syn.owned)
+    assert w.selection_runs == 1 + np.count_nonzero(np.diff(mine) != 1)
+    syn.write_run(w)
+    w.close()
+    on_root(lambda: np.testing.assert_array_equal(read_result(path)["positions"], syn.frames))
+
+
+def test_owned_input_must_match_part(shared_dir):
+    syn = Synthetic()
+    syn.owned = syn.owned[1:]           # a row nobody writes
+    with pytest.raises(ValueError, match="disagrees with part"):
+        syn.writer(os.path.join(shared_dir, "bad.h5"))
+
+
+def test_reserved_attribute_rejected(shared_dir):
+    syn = Synthetic()
+    syn.attrs["status"] = "mine"
+    with pytest.raises(ValueError, match="reserved"):
+        syn.writer(os.path.join(shared_dir, "bad.h5"))
+
+
+def test_existing_file_is_replaced(shared_dir):
+    path = os.path.join(shared_dir, "again.h5")
+    big = Synthetic(frames=4)
+    w = big.writer(path)
+    big.write_run(w)
+    w.close()
+    small = Synthetic(frames=1, seed=12)
+    w = small.writer(path)
+    small.write_run(w)
+    w.close()
+    on_root(lambda: np.testing.assert_array_equal(read_result(path)["positions"], small.frames))
+
+
+# ---------------------------------------------------------------- failures
+
+def test_record_error_keeps_frames_and_marks_failed(shared_dir):
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "failed.h5")
+    w = syn.writer(path)
+    syn.write_run(w, frames=2)
+    syn.write_steps(w, 2)               # steps after the last frame are kept too
+    # the message must be agreed; rank 0's wins if a caller gets it wrong
+    w.record_error(12, "KSP diverged at step 12" if RANK == 0 else "another text")
+    w.close()                            # 'completed' cannot overwrite a recorded error
+
+    def check():
+        r = read_result(path)
+        a = r["attrs"]
+        assert a["status"] == "failed"
+        assert a["error"] == "KSP diverged at step 12" and a["error_step"] == 12
+        assert r["frames_written"] == 2 and r["steps_written"] == 15
+        assert np.array_equal(r["positions"], syn.frames[:2])
+        assert check_xdmf(w.xdmf_path) == []
+        assert len(ET.parse(w.xdmf_path).getroot().findall(".//Grid[@GridType='Uniform']")) == 2
+
+    on_root(check)
+
+
+def test_collective_error_in_with_block_closes_failed(shared_dir):
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "collective.h5")
+    with pytest.raises(CollectiveError):
+        with syn.writer(path) as w:
+            syn.write_run(w, frames=1)
+            raise CollectiveError("cloth left the domain", step=4)   # on every rank
+    assert w.closed
+
+    def check():
+        a = read_result(path)["attrs"]
+        assert a["status"] == "failed" and a["error_step"] == 4
+        assert "cloth left the domain" in a["error"]
+
+    on_root(check)
+
+
+def test_local_exception_makes_no_collective_call(shared_dir):
+    """An ordinary exception may have been raised on some ranks only, so under
+    MPI __exit__ must not close (a collective); the caller agrees and closes."""
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "local.h5")
+    with pytest.raises(ZeroDivisionError):
+        with syn.writer(path) as w:
+            syn.write_run(w, frames=1)
+            1 / 0
+    if SIZE == 1:
+        assert w.closed                  # serial: nothing to deadlock, recorded and closed
+    else:
+        assert not w.closed
+        w.record_error(-1, "agreed afterwards")
+        w.close()
+
+    def check():
+        a = read_result(path)["attrs"]
+        assert a["status"] == "failed" and a["frames_written"] == 1
+
+    on_root(check)
+
+
+# ---------------------------------------------------------------- XDMF
+
+def test_xdmf_rewritten_each_frame_and_valid(shared_dir):
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "xd.h5")
+    w = syn.writer(path)
+    for k in range(3):
+        syn.write_steps(w, k)
+        syn.write_frame(w, k)
+        if RANK == 0:
+            grids = ET.parse(w.xdmf_path).getroot().findall(".//Grid[@GridType='Uniform']")
+            assert len(grids) == k + 1
+            assert float(grids[-1].find("Time").get("Value")) == syn.frame_time[k]
+    w.close()
+    assert w.xdmf_path == os.path.join(shared_dir, "xd.xdmf")
+
+    def check():
+        assert check_xdmf(w.xdmf_path) == []
+        text = open(w.xdmf_path).read()
+        assert "xd.h5:/frames/positions" in text and shared_dir not in text   # relative
+        root = ET.parse(w.xdmf_path).getroot()
+        coll = root.find("Domain/Grid")
+        assert coll.get("GridType") == "Collection" and coll.get("CollectionType") == "Temporal"
+        slab = root.findall(".//Geometry/DataItem")[2]
+        assert slab.get("ItemType") == "HyperSlab"
+        assert slab[0].text.split() == ["2", "0", "0", "1", "1", "1", "1", str(syn.n), "3"]
+        assert not [p for p in os.listdir(shared_dir) if p.endswith(".tmp")]
+
+    on_root(check)
+
+
+def test_check_xdmf_catches_corruption(shared_dir):
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "bad_xdmf.h5")
+    w = syn.writer(path)
+    syn.write_run(w, frames=2)
+    w.close()
+
+    def check():
+        good = open(w.xdmf_path).read()
+        assert check_xdmf(w.xdmf_path) == []
+        n, nt = syn.n, syn.triangles.shape[0]
+        cases = {
+            "wrong source dims": good.replace(f'Dimensions="2 {n} 3"', f'Dimensions="2 {n - 1} 3"'),
+            "wrong topology dims": good.replace(f'Dimensions="{nt} 3"', f'Dimensions="{nt + 1} 3"'),
+            "slab past the end": good.replace("1 0 0\n", "2 0 0\n"),
+            "missing dataset": good.replace("/mesh/triangles", "/mesh/quads"),
+            "wrong precision": good.replace('NumberType="Int" Precision="4"',
+                                            'NumberType="Int" Precision="8"'),
+        }
+        for what, text in cases.items():
+            assert text != good, what
+            bad = os.path.join(shared_dir, "corrupt.xdmf")
+            with open(bad, "w") as fh:
+                fh.write(text)
+            assert check_xdmf(bad), f"check_xdmf missed: {what}"
+        assert any("Dimensions" in p for p in check_xdmf_text(shared_dir, cases["wrong source dims"]))
+
+    on_root(check)
+
+
+def check_xdmf_text(folder, text):
+    path = os.path.join(folder, "corrupt.xdmf")
+    with open(path, "w") as fh:
+        fh.write(text)
+    return check_xdmf(path)
+
+
+# ---------------------------------------------------------------- serial
+
+SERIAL_SCRIPT = textwrap.dedent("""
+    import os, sys
+    import h5py, numpy as np
+    from distcloth.io import ResultWriter
+    assert not h5py.get_config().mpi, "the serial child loaded h5py's MPI build"
+    path, mode, seed = sys.argv[1], sys.argv[2], int(sys.argv[3])
+    rng = np.random.default_rng(seed)
+    n = 1000
+    rest = rng.random((n, 3))
+    triangles = rng.integers(0, n, size=(2 * n - 3, 3))
+    frames = rng.standard_normal((4, n, 3))
+    w = ResultWriter(path, None, rest_positions=rest, triangles=triangles,
+                     owned_input=np.arange(n), part=np.zeros(n, np.int32),
+                     config_text="serial", attrs={"scene": "serial"},
+                     stage_names=%r, diagnostic_names=%r)
+    for k in range(4):
+        for s in range(5):
+            w.write_step(5 * k + s, 0.1 * k, {"kinetic_energy": float(k)}, {"solve": 0.1}, {"solve": 1})
+        w.write_frame(k, 0.1 * k, frames[k])
+        if mode == "crash" and k == 1:
+            os._exit(3)          # no close: what a killed run leaves behind
+        if mode == "error" and k == 1:
+            w.record_error(7, "diverged")
+            os._exit(4)          # killed after recording the error, before close
+    w.close()
+    np.save(path + ".frames.npy", frames)
+""") % (STAGES, DIAGS)
+
+
+def layout(path):
+    """{dataset path: (shape, dtype)} and the root attribute names of a file
+    (the config string's length is the text's, so only its kind is kept)."""
+    out = {}
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset):
+            out[name] = (obj.shape, obj.dtype.kind if name == "config" else obj.dtype)
+
+    with h5py.File(path, "r") as f:
+        f.visititems(visit)
+        return out, set(f.attrs)
+
+
+def run_serial(args):
+    return subprocess.run([sys.executable, "-c", SERIAL_SCRIPT, *args], env=clean_env(),
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.skipif(RANK != 0, reason="a serial child is launched from rank 0 only")
+def test_serial_writer_same_layout(tmp_path):
+    # the parallel file, written by this rank alone through a size-1 split of
+    # the world (so the other ranks need not join), then the serial child's
+    syn = Synthetic(part=np.zeros(1000, np.int32))
+    syn.owned = np.arange(1000)
+    self_comm = MPI.COMM_SELF
+    par = str(tmp_path / "par.h5")
+    w = syn.writer(par, comm=self_comm)
+    syn.write_run(w)
+    w.close()
+    ser = str(tmp_path / "ser.h5")
+    proc = run_serial([ser, "normal", "5"])
+    assert proc.returncode == 0, proc.stderr
+    par_layout, par_attrs = layout(par)
+    ser_layout, ser_attrs = layout(ser)
+    assert par_layout == ser_layout
+    assert par_attrs - set(syn.attrs) == ser_attrs - {"scene"}
+    r = read_result(ser)
+    assert np.array_equal(r["positions"], np.load(ser + ".frames.npy"))
+    assert r["attrs"]["status"] == "completed"
+    assert check_xdmf(str(tmp_path / "ser.xdmf")) == []
+
+
+@pytest.mark.skipif(RANK != 0, reason="a serial child is launched from rank 0 only")
+def test_killed_run_leaves_frames_readable(tmp_path):
+    path = str(tmp_path / "crash.h5")
+    proc = run_serial([path, "crash", "5"])
+    assert proc.returncode == 3, proc.stderr
+    r = read_result(path)
+    assert r["attrs"]["status"] == "running"       # never closed
+    assert r["frames_written"] == 2 and r["steps_written"] == 10
+    frames = np.random.default_rng(5)
+    frames.random((1000, 3))
+    frames.integers(0, 1000, size=(1997, 3))
+    assert np.array_equal(r["positions"], frames.standard_normal((4, 1000, 3))[:2])
+    assert check_xdmf(str(tmp_path / "crash.xdmf")) == []
+    proc = run_serial([path, "error", "5"])
+    assert proc.returncode == 4, proc.stderr
+    r = read_result(path, positions=False)
+    assert (r["attrs"]["status"], r["attrs"]["error"], r["attrs"]["error_step"]) == ("failed", "diverged", 7)
+    assert r["frames_written"] == 2
+
+
+# ---------------------------------------------------------------- previews
+
+def test_previews_written(shared_dir):
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "prev.h5")
+    with syn.writer(path) as w:
+        syn.write_run(w)
+    failed = os.path.join(shared_dir, "prev_failed.h5")
+    w = syn.writer(failed)
+    syn.write_run(w, frames=1)
+    w.record_error(5, "stopped")
+    w.close()
+
+    def check():
+        for p in (path, failed):
+            out = write_previews(p)
+            stem = os.path.splitext(p)[0]
+            assert sorted(out) == sorted([stem + "_energy.png", stem + "_frames.png"])
+            for png in out:
+                with open(png, "rb") as fh:
+                    head = fh.read(8)
+                assert head == b"\x89PNG\r\n\x1a\n" and os.path.getsize(png) > 10_000
+
+    on_root(check)
+
+
+def test_preview_decimation_keeps_a_surface():
+    from distcloth.io.preview import decimate, pick_frames
+    nu = 200
+    i, j = np.meshgrid(np.arange(nu), np.arange(nu))
+    rest = np.c_[i.ravel(), j.ravel(), np.zeros(nu * nu)] / (nu - 1)
+    idx = np.arange(nu * nu).reshape(nu, nu)
+    a, b, c, d = (x.ravel() for x in (idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]))
+    tri = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]])
+    cluster, coarse = decimate(rest, tri, 5000)
+    assert 2500 < coarse.shape[0] <= 5000
+    # no holes: the coarse triangles still cover the unit square
+    centers = np.stack([np.bincount(cluster, weights=rest[:, k]) / np.bincount(cluster)
+                        for k in range(2)], axis=1)
+    p = centers[coarse]
+    area = 0.5 * np.abs(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])).sum()
+    assert area > 0.9
+    assert pick_frames(1) == [0] and pick_frames(10) == [0, 3, 6, 9] and pick_frames(0) == []
