@@ -85,6 +85,9 @@ def _main(args, comm, cmdline_options) -> int:
     if comm.rank == 0:
         try:
             cfg = load_config(args.scene, args.overrides)
+            output = getattr(args, "output", None)
+            if output is not None and not output.lower().endswith((".h5", ".hdf5")):
+                raise ConfigError("--output", output, "a file name ending in .h5 or .hdf5")
         except ConfigError as exc:
             message = format_config_error(exc)
     cfg, message = comm.bcast((cfg, message))

@@ -90,10 +90,12 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
     try:
         for k in range(1, n_steps + 1):
             diag = sim.step()
-            if k % every == 0 or k == n_steps:
-                sim.pipeline.run("output", writer)
+            # the step's row first, so the frame's flush carries it; the output
+            # stage's time is charged to the following step's row
             times, calls = sim.pipeline.take_step_counters()
             writer.write_step(k, sim.time, diag, times, calls)
+            if k % every == 0 or k == n_steps:
+                sim.pipeline.run("output", writer)
             bar.update(k, sim.time)
     except SimulationError as exc:
         log(comm, f"stopped: {exc}")

@@ -127,7 +127,8 @@ class Simulation:
             try:
                 self.system.configure()
             except Exception as exc:   # PETSc error: a bad option value
-                raise ConfigError("solver", dict(self.cfg.solver_options), f"PETSc refused the solver set-up: {exc}")
+                from .linalg.petsc import current_options
+                raise _solver_setup_error(exc, current_options(), self._cmdline) from None
             for name in unused_options():
                 if DEFAULT_SOLVER.get(name, object()) == self.cfg.solver_options.get(name):
                     continue   # a default the scene did not ask for (sub_pc_type with pc_type jacobi)
@@ -326,6 +327,17 @@ class Simulation:
         if self.system is not None:
             self.system.destroy()
         self.ghosts.destroy()
+
+
+def _solver_setup_error(exc, options: dict, cmdline: set) -> ConfigError:
+    """One line naming the option PETSc refused (the one whose value its message quotes)."""
+    parts = [p.strip() for p in str(exc).split("[0]") if p.strip()]
+    reason = parts[-1] if parts else str(exc)
+    for name, value in options.items():
+        if str(value) and str(value) in reason:
+            where = f"command line -distcloth_{name}" if name in cmdline else f"solver.{name}"
+            return ConfigError(where, value, f"PETSc refused it: {reason}")
+    return ConfigError("solver", "", f"PETSc refused the solver set-up: {reason}")
 
 
 def _nan_injection(rank: int):

@@ -222,7 +222,7 @@ ERRORS = [
     ("solver", {"distcloth_ksp_rtol": 1e-8},
      "solver.distcloth_ksp_rtol: 1e-08 — a PETSc option without the prefix distcloth_ "
      "(distcloth adds it): write ksp_rtol"),
-    ("solver", {"KSP_type": "cg"}, "solver.KSP_type: 'cg' — a PETSc option name: lower-case "
+    ("solver", {"ksp type": "cg"}, "solver.ksp type: 'cg' — a PETSc option name: "
                                    "letters, digits and _, starting with a letter"),
     ("solver", {"ksp_type": ["cg"]},
      "solver.ksp_type: ['cg'] — a string, a finite number or a boolean"),

@@ -9,6 +9,7 @@ identically from a fixed seed.  Also passes on one rank.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -113,6 +114,22 @@ def on_root(check):
         pytest.fail(f"rank 0 failed: {failed}")
 
 
+def all_ranks(ok: bool, what: str) -> None:
+    """Assert on every rank at once: a rank failing alone would leave the
+    others waiting in the writer's next collective call."""
+    if not COMM.allreduce(bool(ok), op=MPI.LAND):
+        pytest.fail(f"{what} (failed on some rank; this rank: {'ok' if ok else 'failed'})")
+
+
+def raises(exc_type, match, fn):
+    """(raised as expected, result of fn if it did not raise), without
+    leaving this rank before the others."""
+    try:
+        return False, fn()
+    except exc_type as err:
+        return re.search(match, str(err)) is not None, None
+
+
 def clean_env() -> dict:
     """Environment for a serial child: no trace of the MPI launch."""
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
@@ -174,8 +191,8 @@ def test_missing_values_are_nan_and_unknown_names_raise(shared_dir):
     w.write_step(0, 0.1, full, {k: 0.5 for k in STAGES}, {k: 3 for k in STAGES})
     w.write_step(1, 0.2, full, {k: 0.5 for k in STAGES}, {k: 3 for k in STAGES})  # buffer full
     w.write_step(2, 0.3, {"kinetic_energy": 2.0}, {"solve": 0.25}, {"solve": 4})
-    with pytest.raises(KeyError, match="unknown diagnostic"):
-        w.write_step(3, 0.4, {"not_declared": 1.0})
+    ok, _ = raises(KeyError, "unknown diagnostic", lambda: w.write_step(3, 0.4, {"not_declared": 1.0}))
+    all_ranks(ok, "write_step accepted an undeclared diagnostic")
     w.write_frame(2, 0.3, syn.frames[0][syn.owned])
     w.write_step(3, 0.4, {"elastic_energy": 5.0})
     w.close()
@@ -198,9 +215,9 @@ def test_rank_owning_nothing_takes_part(shared_dir):
     syn = Synthetic(part=np.zeros(1000, np.int32))     # everything on rank 0
     path = os.path.join(shared_dir, "empty_rank.h5")
     w = syn.writer(path)
-    assert w.selection_kind == ("hyperslab" if RANK == 0 else "none")
     syn.write_run(w)
     w.close()
+    all_ranks(w.selection_kind == ("hyperslab" if RANK == 0 else "none"), "selection kind")
     on_root(lambda: np.testing.assert_array_equal(read_result(path)["positions"], syn.frames))
 
 
@@ -211,26 +228,30 @@ def test_point_and_hyperslab_selections_mix(shared_dir, monkeypatch):
     syn = Synthetic()
     path = os.path.join(shared_dir, "points.h5")
     w = syn.writer(path)
-    assert w.selection_kind == ("points" if RANK == 0 else "hyperslab")
-    mine = np.sort(syn.owned)
-    assert w.selection_runs == 1 + np.count_nonzero(np.diff(mine) != 1)
     syn.write_run(w)
     w.close()
+    all_ranks(w.selection_kind == ("points" if RANK == 0 else "hyperslab"), "selection kind")
+    mine = np.sort(syn.owned)
+    all_ranks(w.selection_runs == 1 + np.count_nonzero(np.diff(mine) != 1), "run count")
     on_root(lambda: np.testing.assert_array_equal(read_result(path)["positions"], syn.frames))
 
 
 def test_owned_input_must_match_part(shared_dir):
     syn = Synthetic()
     syn.owned = syn.owned[1:]           # a row nobody writes
-    with pytest.raises(ValueError, match="disagrees with part"):
-        syn.writer(os.path.join(shared_dir, "bad.h5"))
+    ok, w = raises(ValueError, "disagrees with part", lambda: syn.writer(os.path.join(shared_dir, "bad.h5")))
+    if w is not None:
+        w.close()
+    all_ranks(ok, "owned_input inconsistent with part accepted")
 
 
 def test_reserved_attribute_rejected(shared_dir):
     syn = Synthetic()
     syn.attrs["status"] = "mine"
-    with pytest.raises(ValueError, match="reserved"):
-        syn.writer(os.path.join(shared_dir, "bad.h5"))
+    ok, w = raises(ValueError, "reserved", lambda: syn.writer(os.path.join(shared_dir, "bad.h5")))
+    if w is not None:
+        w.close()
+    all_ranks(ok, "reserved attribute accepted")
 
 
 def test_existing_file_is_replaced(shared_dir):
@@ -317,17 +338,21 @@ def test_xdmf_rewritten_each_frame_and_valid(shared_dir):
     syn = Synthetic()
     path = os.path.join(shared_dir, "xd.h5")
     w = syn.writer(path)
+    seen = []       # (grids, last time) in the sidecar after each frame, checked after close
     for k in range(3):
         syn.write_steps(w, k)
         syn.write_frame(w, k)
         if RANK == 0:
-            grids = ET.parse(w.xdmf_path).getroot().findall(".//Grid[@GridType='Uniform']")
-            assert len(grids) == k + 1
-            assert float(grids[-1].find("Time").get("Value")) == syn.frame_time[k]
+            try:
+                grids = ET.parse(w.xdmf_path).getroot().findall(".//Grid[@GridType='Uniform']")
+                seen.append((len(grids), float(grids[-1].find("Time").get("Value"))))
+            except Exception as err:   # noqa: BLE001 - reported after close
+                seen.append(repr(err))
     w.close()
-    assert w.xdmf_path == os.path.join(shared_dir, "xd.xdmf")
 
     def check():
+        assert seen == [(k + 1, syn.frame_time[k]) for k in range(3)]
+        assert w.xdmf_path == os.path.join(shared_dir, "xd.xdmf")
         assert check_xdmf(w.xdmf_path) == []
         text = open(w.xdmf_path).read()
         assert "xd.h5:/frames/positions" in text and shared_dir not in text   # relative

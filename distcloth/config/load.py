@@ -51,7 +51,7 @@ SCENE_KEYS = {"scene": LEAF, "cloth": [CLOTH_KEYS], **_leaves("effects", "gravit
 MESH_SUFFIXES = (".obj", ".ply")
 OUTPUT_SUFFIXES = (".h5", ".hdf5")
 SOLVER_PREFIX = "distcloth_"
-OPTION_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
+OPTION_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")  # PETSc names may hold capitals (pc_hypre_boomeramg_P_max)
 # PyYAML (YAML 1.1) wants a dot in a float: '1e-8' comes back as a string
 YAML11_MISSED_FLOAT = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
 MAX_NEWTON_ITERATIONS = 100
@@ -447,7 +447,7 @@ def _check_option_name(name: Any, key: str, entry: Any) -> None:
         raise ConfigError(key, entry, f"a PETSc option without the prefix {SOLVER_PREFIX} "
                           f"(distcloth adds it): write {name[len(SOLVER_PREFIX):]}")
     if not isinstance(name, str) or not OPTION_NAME.match(name):
-        raise ConfigError(key, entry, "a PETSc option name: lower-case letters, digits and _,"
+        raise ConfigError(key, entry, "a PETSc option name: letters, digits and _,"
                           " starting with a letter")
 
 

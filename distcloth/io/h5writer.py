@@ -59,10 +59,12 @@ FORMAT_VERSION = 1
 # Above this many runs of consecutive input indices, a rank selects its rows
 # as points instead of an OR of hyperslabs: HDF5 1.10.8 merges each OR'ed
 # hyperslab into the whole span tree, so building R runs costs O(R^2)
-# (measured: 4k runs 0.15 s, 16k runs 3.5 s, 64k runs 74 s), whereas a point
-# selection is built in O(n_owned).  Points make the write itself about twice
-# as slow, so hyperslabs stay the choice for the common blocky partitions.
-MAX_HYPERSLAB_RUNS = 4096
+# (measured: 4k runs 0.15 s, 8k 0.8 s, 16k 3.5 s, 64k 74 s), whereas a
+# point selection is built in O(n_owned).  The selection is built once per
+# run, but points make every frame's write about twice as slow (400k
+# vertices, 2 ranks: ~70 ms with hyperslabs, ~150 ms with points), so
+# hyperslabs stay the choice up to a one-off cost of about a second.
+MAX_HYPERSLAB_RUNS = 8192
 
 # Frames chunked one frame at a time, <= 64k vertices (1.5 MiB) per chunk.
 FRAME_CHUNK_VERTICES = 65536
@@ -488,8 +490,9 @@ class ResultWriter:
         if exc is None:
             self.close()
         elif self.size == 1 or getattr(exc, "collective", False):
-            step = getattr(exc, "step", -1)
-            self.record_error(step if isinstance(step, int) else -1, f"{exc_type.__name__}: {exc}")
+            if not self._error_recorded:       # keep an error the caller already recorded
+                step = getattr(exc, "step", -1)
+                self.record_error(step if isinstance(step, int) else -1, f"{exc_type.__name__}: {exc}")
             self.close("failed")
         # else: an exception on some ranks only; no collective call is safe
         # here (see the module docstring).  The file keeps its last flush.

@@ -79,3 +79,9 @@ def unused_options() -> list[str]:
         if err == 0 and not used.value:
             out.append(name[len(PREFIX):])
     return out
+
+
+def current_options() -> dict[str, str]:
+    """Every option under the prefix now in the database (name without prefix -> value)."""
+    from petsc4py import PETSc
+    return {k[len(PREFIX):]: v for k, v in PETSc.Options().getAll().items() if k.startswith(PREFIX)}
