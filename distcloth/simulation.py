@@ -57,6 +57,9 @@ class Simulation:
 
         self.cfg, self.model, self.comm = cfg, model, comm
         self.quiet = quiet
+        # checked on the global model, identically on every rank, before any collective
+        if np.any(model.vertex_mass <= 0):
+            raise ConfigError("cloth", "mesh", "every vertex needs mass: a vertex belongs to no triangle")
         xadj, adjncy = model.matrix_graph()
         part = partition_on_root(comm, xadj, adjncy)
         self.layout = build_layout(xadj, adjncy, model.spring_vertices, part, comm.rank, comm.size)
@@ -65,8 +68,6 @@ class Simulation:
         self.n_owned, self.n_local = lay.n_owned, lay.n_local
         local = lay.local_input
         self.mass = model.vertex_mass[local].copy()
-        if np.any(self.mass[: self.n_owned] <= 0):
-            raise ConfigError("cloth", "mesh", "every vertex needs mass: a vertex belongs to no triangle")
         self.x = model.start_positions()[local].astype(np.float64).copy()
         self.v = model.start_velocities()[local].astype(np.float64).copy()
         to_local = np.full(model.num_vertices, -1, dtype=np.int64)

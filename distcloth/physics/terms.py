@@ -47,21 +47,17 @@ class ForceTerm:
         return 0.0
 
 
-class SpringTerm(ForceTerm):
-    """Elastic springs of some kinds (membrane: structural + shear; bending: flexion)."""
+class _SpringSet(ForceTerm):
+    """Springs on local vertices: the stencils and Jacobian buffers they share."""
 
-    def __init__(self, name, springs, rest, stiffness, weight, strain_mask, clamp=True):
+    def __init__(self, name, springs, rest):
         self.name = name
         self.springs = np.ascontiguousarray(springs, dtype=np.int64)
         self.rest = np.ascontiguousarray(rest, dtype=np.float64)
-        self.k = np.ascontiguousarray(stiffness, dtype=np.float64)
-        self.weight = np.ascontiguousarray(weight, dtype=np.float64)
-        self.strain_mask = np.ascontiguousarray(strain_mask, dtype=np.bool_)
-        self.clamp = clamp
         ns = self.springs.shape[0]
         self.hess = np.zeros((ns, 3, 3))
         self.unit = np.zeros((ns, 3))
-        self._zero_c = np.zeros(ns)
+        self._zero = np.zeros(ns)
         self.slots = None
 
     def stencils(self):
@@ -70,8 +66,19 @@ class SpringTerm(ForceTerm):
     def bind(self, pattern):
         self.slots = pattern.slots_for(self.springs)
 
+
+class SpringTerm(_SpringSet):
+    """Elastic springs of some kinds (membrane: structural + shear; bending: flexion)."""
+
+    def __init__(self, name, springs, rest, stiffness, weight, strain_mask, clamp=True):
+        super().__init__(name, springs, rest)
+        self.k = np.ascontiguousarray(stiffness, dtype=np.float64)
+        self.weight = np.ascontiguousarray(weight, dtype=np.float64)
+        self.strain_mask = np.ascontiguousarray(strain_mask, dtype=np.bool_)
+        self.clamp = clamp
+
     def evaluate(self, x, v, force, want_jac):
-        energy, strain = sk.spring_forces(x, v, self.springs, self.rest, self.k, self._zero_c,
+        energy, strain = sk.spring_forces(x, v, self.springs, self.rest, self.k, self._zero,
                                           self.weight, self.clamp, want_jac, force,
                                           self.hess, self.unit, self.strain_mask)
         return {"elastic_energy": energy, "max_strain": strain}
@@ -80,33 +87,19 @@ class SpringTerm(ForceTerm):
         sk.spring_stiffness_product(self.springs, self.hess, w, out)
 
     def add_to_system(self, data, alpha, beta):
-        sk.add_spring_blocks(self.hess, self.unit, self._zero_c, alpha, 0.0, self.slots, data)
+        sk.add_spring_blocks(self.hess, self.unit, self._zero, alpha, 0.0, self.slots, data)
 
     def energy(self, x):
         return sk.spring_energy_only(x, self.springs, self.rest, self.k, self.weight)
 
 
-class SpringDampingTerm(ForceTerm):
+class SpringDampingTerm(_SpringSet):
     """Damping along every spring on the relative velocity of its ends."""
 
     def __init__(self, springs, rest, damping):
-        self.name = "force:damping"
-        self.springs = np.ascontiguousarray(springs, dtype=np.int64)
-        self.rest = np.ascontiguousarray(rest, dtype=np.float64)
+        super().__init__("force:damping", springs, rest)
         self.c = np.ascontiguousarray(damping, dtype=np.float64)
-        ns = self.springs.shape[0]
-        self._zero = np.zeros(ns)
-        self._ones = np.ones(ns)
-        self._mask = np.zeros(ns, dtype=np.bool_)
-        self.hess = np.zeros((ns, 3, 3))
-        self.unit = np.zeros((ns, 3))
-        self.slots = None
-
-    def stencils(self):
-        return [self.springs]
-
-    def bind(self, pattern):
-        self.slots = pattern.slots_for(self.springs)
+        self._mask = np.zeros(self.springs.shape[0], dtype=np.bool_)
 
     def evaluate(self, x, v, force, want_jac):
         # zero stiffness: only the damping part of the spring force remains
