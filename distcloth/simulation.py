@@ -141,14 +141,20 @@ class Simulation:
         else:
             self.check_explicit_step()
 
-    def check_explicit_step(self) -> None:
-        """h < 0.9 * 2 / sqrt(lambda_max(M^-1 K)), lambda_max from Gershgorin (DESIGN.md §9)."""
+    def explicit_step_limits(self) -> tuple[float, float]:
+        """(0.9 * 2 / sqrt(lambda_max(M^-1 K)) with lambda_max from Gershgorin,
+        seed 002 Eq. 4's 0.4 pi sqrt(m / K)); collective."""
         lam = self.comm.max(np.array([self._gershgorin_local()]))[0]
         kmax = self.comm.max(np.array([max((float(t.k.max()) for t in self.terms
                                             if hasattr(t, "k") and t.k.size), default=0.0)]))[0]
         mmin = -self.comm.max(np.array([-float(self.mass[: self.n_owned].min())]))[0]
         limit = 0.9 * 2.0 / math.sqrt(lam) if lam > 0 else math.inf
         seed = 0.4 * math.pi * math.sqrt(mmin / kmax) if kmax > 0 else math.inf
+        return limit, seed
+
+    def check_explicit_step(self) -> None:
+        """Refuse h >= 0.9 * 2 / sqrt(lambda_max(M^-1 K)) (DESIGN.md §9) unless forced."""
+        limit, seed = self.explicit_step_limits()
         message = (f"explicit step limit: h < {limit:.4g} s (0.9*2/sqrt(lambda_max), Gershgorin); "
                    f"seed 002 Eq. 4 gives {seed:.4g} s; h = {self.h:g} s")
         if self.h >= limit and self.force_explicit:
