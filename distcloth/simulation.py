@@ -87,7 +87,9 @@ class Simulation:
             self.system = LinearSystem(lay, self.pattern, cfg.mat_type, cfg.warm_start,
                                        cfg.pc_rebuild_every)
         self.pipeline = self._build_pipeline()
-        self.accept_hooks = []      # callables(result) -> reason or None (a rejected step)
+        # callables(result) -> reason or None; a reason rejects the step. A hook must
+        # give the same verdict on every rank (reduce what it checks).
+        self.accept_hooks = []
         self.time = 0.0
         self.step_index = 0
         self.h = cfg.time.step
