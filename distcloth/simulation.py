@@ -144,20 +144,23 @@ class Simulation:
             self.check_explicit_step()
 
     def explicit_step_limits(self) -> tuple[float, float]:
-        """(0.9 * 2 / sqrt(lambda_max(M^-1 K)) with lambda_max from Gershgorin,
+        """(0.9 * c / sqrt(lambda_max(M^-1 K)) with lambda_max from Gershgorin and c
+        the integrator's stability factor (2 for symplectic Euler),
         seed 002 Eq. 4's 0.4 pi sqrt(m / K)); collective."""
         lam = self.comm.max(np.array([self._gershgorin_local()]))[0]
         kmax = self.comm.max(np.array([max((float(t.k.max()) for t in self.terms
                                             if hasattr(t, "k") and t.k.size), default=0.0)]))[0]
         mmin = -self.comm.max(np.array([-float(self.mass[: self.n_owned].min())]))[0]
-        limit = 0.9 * 2.0 / math.sqrt(lam) if lam > 0 else math.inf
+        factor = self.integrator.stability_factor
+        limit = 0.9 * factor / math.sqrt(lam) if lam > 0 else math.inf
         seed = 0.4 * math.pi * math.sqrt(mmin / kmax) if kmax > 0 else math.inf
         return limit, seed
 
     def check_explicit_step(self) -> None:
         """Refuse h >= 0.9 * 2 / sqrt(lambda_max(M^-1 K)) (DESIGN.md §9) unless forced."""
         limit, seed = self.explicit_step_limits()
-        message = (f"explicit step limit: h < {limit:.4g} s (0.9*2/sqrt(lambda_max), Gershgorin); "
+        message = (f"explicit step limit: h < {limit:.4g} s (0.9*{self.integrator.stability_factor:.3g}"
+                   f"/sqrt(lambda_max), Gershgorin); "
                    f"seed 002 Eq. 4 gives {seed:.4g} s; h = {self.h:g} s")
         if self.h >= limit and self.force_explicit:
             log(self.comm, message + ": above the limit, running anyway because of --force")
@@ -165,8 +168,9 @@ class Simulation:
             self.say(message)
         if self.h >= limit and not self.force_explicit:
             raise ConfigError("time.step", self.h,
-                              f"symplectic Euler is unstable above {limit:.4g} s for this cloth "
-                              f"(0.9*2/sqrt(lambda_max(M^-1 K))); use a smaller step, an implicit "
+                              f"{self.cfg.time.integrator} is unstable above {limit:.4g} s for this "
+                              f"cloth (0.9*{self.integrator.stability_factor:.3g}/sqrt(lambda_max(M^-1 K))); "
+                              f"use a smaller step, an implicit "
                               f"integrator, or --force")
 
     def _gershgorin_local(self) -> float:
@@ -321,6 +325,7 @@ class Simulation:
             reason = hook(result)
             if reason:
                 raise SimulationError(k, f"step rejected: {reason}")
+        self.integrator.accepted()
         self.pipeline.run("update", result)
         self.time = k * h
         diag = self.pipeline.run("diagnostics", result)

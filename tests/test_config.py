@@ -153,7 +153,8 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
 
 
 THE_EFFECTS = "one of gravity | membrane | bending | damping | drag"
-TIME_KEYS = "end, step, integrator, newton_iterations, newton_tolerance"
+TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
+             "newmark_gamma")
 
 # (key path set on base_scene(), value, the expected line after 'config error: ')
 ERRORS = [
@@ -178,8 +179,10 @@ ERRORS = [
     ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
     ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
     ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
-    ("time", {"integrator": "rk4"},
-     "time.integrator: 'rk4' — one of backward_euler | symplectic_euler"),
+    ("time", {"integrator": "rk5"},
+     "time.integrator: 'rk5' — one of backward_euler | bdf2 | implicit_midpoint | newmark | "
+     "symplectic_euler | explicit_midpoint | rk4"),
+    ("time", {"newmark_beta": 0.6}, "time.newmark_beta: 0.6 — a finite number >= 0 and <= 0.5"),
     ("time", {"newton_iterations": 0}, "time.newton_iterations: 0 — an integer >= 1 and <= 100"),
     ("time", {"newton_iterations": 2.0},
      "time.newton_iterations: 2.0 — an integer >= 1 and <= 100"),

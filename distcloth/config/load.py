@@ -43,7 +43,8 @@ BOX_KEYS = _leaves("min", "max")
 PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS}
 MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping")
 CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
-TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance")
+TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
+                    "newmark_beta", "newmark_gamma")
 OUTPUT_KEYS = _leaves("file", "every", "preview")
 SCENE_KEYS = {"scene": LEAF, "cloth": [CLOTH_KEYS], **_leaves("effects", "gravity", "drag"),
               "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS}
@@ -409,6 +410,10 @@ def _read_time(value: Any, key: str) -> TimeSpec:
                                     read_int, at_least=1, at_most=MAX_NEWTON_ITERATIONS),
         newton_tolerance=_optional(section, key, "newton_tolerance", d.newton_tolerance,
                                    read_float, above=0),
+        newmark_beta=_optional(section, key, "newmark_beta", d.newmark_beta, read_float,
+                               at_least=0, at_most=0.5),
+        newmark_gamma=_optional(section, key, "newmark_gamma", d.newmark_gamma, read_float,
+                                above=0, at_most=1),
     )
 
 

@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 EFFECTS = ("gravity", "membrane", "bending", "damping", "drag")
-INTEGRATORS = ("backward_euler", "symplectic_euler")
+INTEGRATORS = ("backward_euler", "bdf2", "implicit_midpoint", "newmark",
+               "symplectic_euler", "explicit_midpoint", "rk4")
 GRID_PATTERNS = ("regular", "alternating")
 GRID_EDGES = ("left", "right", "bottom", "top")
 GRID_CORNERS = ("bottom_left", "bottom_right", "top_left", "top_right")
@@ -90,6 +91,8 @@ class TimeSpec:
     integrator: str = "backward_euler"
     newton_iterations: int = 1
     newton_tolerance: float = 1.0e-8
+    newmark_beta: float = 0.25    # Newmark's beta and gamma (average acceleration by default)
+    newmark_gamma: float = 0.5
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
 """What an integrator returns for one step."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,9 +19,13 @@ class StepResult:
 
 class Integrator:
     implicit = True
+    stability_factor = math.inf      # explicit schemes: h < 0.9 * factor / sqrt(lambda_max)
 
     def __init__(self, cfg):
         self.cfg = cfg
 
     def step(self, sim, h: float, cons) -> StepResult:
         raise NotImplementedError
+
+    def accepted(self) -> None:
+        """The driver committed the last proposed step."""
