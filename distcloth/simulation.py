@@ -23,6 +23,7 @@ import numpy as np
 from .config.schema import DEFAULT_SOLVER, ConfigError
 from .integrate import make_integrator
 from .linalg.constraints import Constraints, filter_system
+from .linalg.system import SolverFailure
 from .linalg.pattern import BlockPattern
 from .physics.terms import FORCE_STAGES, build_terms
 from .pipeline import Pipeline
@@ -31,7 +32,7 @@ STAGES = ("kinematics", "constraints") + FORCE_STAGES + ("assembly", "solve", "u
                                                         "diagnostics", "output")
 DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_energy",
                "total_energy", "max_strain", "max_speed", "newton_iterations",
-               "newton_residual", "ksp_iterations", "ksp_residual")
+               "newton_residual", "ksp_iterations", "ksp_residual", "rejected_steps")
 MAX_SPEED = 1.0e3   # m/s: beyond this a cloth simulation has blown up
 
 
@@ -87,9 +88,11 @@ class Simulation:
             self.system = LinearSystem(lay, self.pattern, cfg.mat_type, cfg.warm_start,
                                        cfg.pc_rebuild_every)
         self.pipeline = self._build_pipeline()
-        # callables(result) -> reason or None; a reason rejects the step. A hook must
-        # give the same verdict on every rank (reduce what it checks).
+        # callables(sim, result) -> reason or None, run on the tentative state
+        # (ghosts valid); a reason rejects the step. A hook must give the same
+        # verdict on every rank (reduce what it checks).
         self.accept_hooks = []
+        self.rejections = 0
         self.time = 0.0
         self.step_index = 0
         self.h = cfg.time.step
@@ -272,21 +275,14 @@ class Simulation:
         m = self.mass[:n]
         kinetic = 0.5 * float(np.sum(m * np.einsum("ij,ij->i", self.v[:n], self.v[:n])))
         grav = elastic = 0.0
-        strain = 0.0
         for t in self.terms:
             if t.name == "force:gravity":
                 grav += t.energy(self.x)
             elif t.has_jacobian and hasattr(t, "k"):
                 elastic += t.energy(self.x)
-                if t.name == "force:membrane" and t.springs.size:
-                    d = self.x[t.springs[:, 0]] - self.x[t.springs[:, 1]]
-                    st = (np.sqrt(np.einsum("ij,ij->i", d, d)) - t.rest) / t.rest
-                    strain = max(strain, float(np.max(st[t.strain_mask], initial=0.0)))
-        finite = bool(np.all(np.isfinite(self.x[:n])) and np.all(np.isfinite(self.v[:n])))
-        speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", self.v[:n], self.v[:n]), initial=0.0))) \
-            if finite else math.inf
-        sums = self.comm.sum(np.array([kinetic, grav, elastic, 0.0 if finite else 1.0]))
-        maxes = self.comm.max(np.array([strain, speed if math.isfinite(speed) else 1e300]))
+        speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", self.v[:n], self.v[:n]), initial=0.0)))
+        sums = self.comm.sum(np.array([kinetic, grav, elastic]))
+        maxes = self.comm.max(np.array([self._max_strain(), speed]))
         return {
             "step_size": self.h,
             "kinetic_energy": sums[0], "gravitational_energy": sums[1], "elastic_energy": sums[2],
@@ -294,7 +290,7 @@ class Simulation:
             "max_strain": maxes[0], "max_speed": maxes[1],
             "newton_iterations": result.newton_iterations, "newton_residual": result.newton_residual,
             "ksp_iterations": result.ksp_iterations, "ksp_residual": result.ksp_residual,
-            "_nonfinite_ranks": sums[3],
+            "rejected_steps": self.rejections,
         }
 
     def _output(self, writer):
@@ -305,37 +301,90 @@ class Simulation:
         return self.x[: self.n_owned]
 
     def step(self) -> dict:
-        """Advance one step; returns the diagnostics.  Raises SimulationError on
-        every rank together."""
-        h = self.h
+        """Advance one step of the scene's h; returns the diagnostics.  Raises
+        SimulationError on every rank together.
+
+        A rejected attempt (failed solve; NaN, blow-up or strain bound after
+        the tentative update; an acceptance hook's verdict) is undone and,
+        with ``time.adaptive``, retried as two steps of h/2, recursively up to
+        ``time.max_halvings`` times; otherwise the run stops naming the cause."""
         self.step_index += 1
-        k = self.step_index
+        result, h_min = self._advance(self.h, 0)
+        self.time = self.step_index * self.h        # no drift from summed substeps
+        diag = self.pipeline.run("diagnostics", result)
+        diag["step_size"] = h_min
+        return diag
+
+    def _advance(self, h, depth):
+        result, reason, fatal = self._attempt(h)
+        if reason is None:
+            return result, h
+        tc = self.cfg.time
+        if fatal or not tc.adaptive or depth >= tc.max_halvings:
+            if tc.adaptive and not fatal:
+                reason += f" (after {depth} halvings, h = {h:.3g} s)"
+            raise SimulationError(self.step_index, reason)
+        self.say(f"step {self.step_index}: rejected at h = {h:.3g} s ({reason}); "
+                 f"retrying as two steps of {h / 2:.3g} s")
+        self.rejections += 1
+        self._advance(h / 2, depth + 1)
+        result, h2 = self._advance(h / 2, depth + 1)
+        return result, min(h2, h / 2)
+
+    def _attempt(self, h):
+        """One tentative step: (result, None, False) if accepted and committed,
+        else (None, reason, fatal) with the state unchanged."""
         target = self.pipeline.run("kinematics", self.time + h)
         cons = self.pipeline.run("constraints", target)
-        error = None
-        result = None
+        error, solver_failure, result = None, False, None
         try:
             result = self.integrator.step(self, h, cons)
-        except Exception as exc:          # a solver failure is the same on all ranks,
-            error = f"{type(exc).__name__}: {exc}"   # a local bug is not: agree on it
+        except SolverFailure as exc:      # the same on every rank
+            error, solver_failure = f"SolverFailure: {exc}", True
+        except Exception as exc:          # a local bug is not: agree on it
+            error = f"{type(exc).__name__}: {exc}"
         agreed = self.comm.agree(error)
         if agreed is not None:
-            raise SimulationError(k, agreed[1] + (f" (rank {agreed[0]})" if self.comm.size > 1 else ""))
-        for hook in self.accept_hooks:
-            reason = hook(result)
-            if reason:
-                raise SimulationError(k, f"step rejected: {reason}")
-        self.integrator.accepted()
+            where = f" (rank {agreed[0]})" if self.comm.size > 1 and not solver_failure else ""
+            return None, agreed[1] + where, not solver_failure
+        saved = (self.x.copy(), self.v.copy())
         self.pipeline.run("update", result)
-        self.time = k * h
-        diag = self.pipeline.run("diagnostics", result)
-        if diag["_nonfinite_ranks"] > 0:
-            raise SimulationError(k, "NaN or Inf in positions or velocities")
-        if diag["max_speed"] > MAX_SPEED:
-            raise SimulationError(k, f"blow-up: a vertex moves at {diag['max_speed']:.3g} m/s "
-                                     f"(limit {MAX_SPEED:g} m/s)")
-        del diag["_nonfinite_ranks"]
-        return diag
+        reason = self._check_state()
+        for hook in self.accept_hooks:
+            reason = reason or hook(self, result)
+        if reason:
+            self.x, self.v = saved
+            return None, reason, False
+        self.integrator.accepted()
+        self.time += h
+        return result, None, False
+
+    def _check_state(self) -> str | None:
+        """Collective health check of the tentative state (one reduction)."""
+        n = self.n_owned
+        finite = bool(np.all(np.isfinite(self.x[:n])) and np.all(np.isfinite(self.v[:n])))
+        speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", self.v[:n], self.v[:n]), initial=0.0))) \
+            if finite else 0.0
+        strain = self._max_strain() if finite and self.cfg.time.max_strain is not None else 0.0
+        bad, speed, strain = self.comm.max(np.array([0.0 if finite else 1.0, speed, strain]))
+        if bad:
+            return "NaN or Inf in positions or velocities"
+        if speed > MAX_SPEED:
+            return f"blow-up: a vertex moves at {speed:.3g} m/s (limit {MAX_SPEED:g} m/s)"
+        if self.cfg.time.max_strain is not None and strain > self.cfg.time.max_strain:
+            return f"strain {strain:.3g} exceeds time.max_strain = {self.cfg.time.max_strain:g}"
+        return None
+
+    def _max_strain(self) -> float:
+        """Largest engineering strain of the structural springs (local, ghosts valid)."""
+        out = 0.0
+        for t in self.terms:
+            if t.name == "force:membrane" and hasattr(t, "strain_mask") and t.springs.size:
+                sp = t.springs[t.strain_mask]
+                d = self.x[sp[:, 0]] - self.x[sp[:, 1]]
+                st = (np.sqrt(np.einsum("ij,ij->i", d, d)) - t.rest[t.strain_mask]) / t.rest[t.strain_mask]
+                out = max(out, float(np.max(st, initial=0.0)))
+        return out
 
     def destroy(self):
         if self.system is not None:

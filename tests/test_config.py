@@ -154,7 +154,7 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
 
 THE_EFFECTS = "one of gravity | membrane | bending | damping | drag"
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
-             "newmark_gamma")
+             "newmark_gamma, adaptive, max_halvings, max_strain")
 
 # (key path set on base_scene(), value, the expected line after 'config error: ')
 ERRORS = [

@@ -215,3 +215,47 @@ def test_explicit_stability_limit():
     assert run(limit * 0.999, 1000) <= 10 * v0          # bounded at the limit
     with pytest.raises(SimulationError, match="blow-up|NaN"):
         run(1.1 * h_true, 1000)                          # unstable just above it
+
+
+def adaptive_scene(**time):
+    # Jacobi-preconditioned CG capped at 40 iterations: at h = 20 ms a solve needs
+    # about 46, at 10 ms up to 43, at 5 ms about 20 (measured on this scene)
+    raw = grid_scene(time={"end": 0.2, "step": 0.02, **time},
+                     solver={"ksp_rtol": 1e-10, "ksp_norm_type": "unpreconditioned",
+                             "pc_type": "jacobi", "ksp_max_it": 40})
+    raw["cloth"][0]["pins"] = [{"edge": "top"}]
+    return raw
+
+
+def test_failed_solve_stops_without_adaptive_steps():
+    from distcloth.simulation import SimulationError
+    sim = make_sim(adaptive_scene())
+    with pytest.raises(SimulationError, match="step 2: .*did not converge"):
+        for _ in range(10):
+            sim.step()
+    sim.destroy()
+
+
+def test_adaptive_step_halving_rescues_failed_solves():
+    sim = make_sim(adaptive_scene(adaptive=True, max_halvings=4))
+    start = gather_positions(sim)
+    diags = [sim.step() for _ in range(10)]
+    assert abs(sim.time - 0.2) < 1e-12
+    assert diags[-1]["rejected_steps"] > 0
+    assert min(d["step_size"] for d in diags) <= 0.01
+    x = gather_positions(sim)
+    assert np.all(np.isfinite(x)) and x[:, 2].mean() < start[:, 2].mean()
+    sim.destroy()
+
+
+def test_strain_bound_rejects_and_names_the_cause():
+    from distcloth.simulation import SimulationError
+    # the hanging cloth stretches ~1 % under its own weight whatever the step,
+    # so halving cannot meet a 0.1 % bound: the run must stop and say why
+    raw = adaptive_scene(adaptive=True, max_halvings=2, max_strain=0.001)
+    raw["solver"] = {"ksp_rtol": 1e-10}
+    sim = make_sim(raw)
+    with pytest.raises(SimulationError, match=r"strain .* exceeds time.max_strain .*after 2 halvings"):
+        for _ in range(10):
+            sim.step()
+    sim.destroy()

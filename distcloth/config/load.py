@@ -44,7 +44,7 @@ PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS}
 MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping")
 CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
-                    "newmark_beta", "newmark_gamma")
+                    "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
 OUTPUT_KEYS = _leaves("file", "every", "preview")
 SCENE_KEYS = {"scene": LEAF, "cloth": [CLOTH_KEYS], **_leaves("effects", "gravity", "drag"),
               "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS}
@@ -414,6 +414,10 @@ def _read_time(value: Any, key: str) -> TimeSpec:
                                at_least=0, at_most=0.5),
         newmark_gamma=_optional(section, key, "newmark_gamma", d.newmark_gamma, read_float,
                                 above=0, at_most=1),
+        adaptive=_optional(section, key, "adaptive", d.adaptive, read_bool),
+        max_halvings=_optional(section, key, "max_halvings", d.max_halvings, read_int,
+                               at_least=1, at_most=30),
+        max_strain=_optional(section, key, "max_strain", d.max_strain, read_float, above=0),
     )
 
 

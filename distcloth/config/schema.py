@@ -93,6 +93,9 @@ class TimeSpec:
     newton_tolerance: float = 1.0e-8
     newmark_beta: float = 0.25    # Newmark's beta and gamma (average acceleration by default)
     newmark_gamma: float = 0.5
+    adaptive: bool = False        # halve h and retry a rejected step
+    max_halvings: int = 6
+    max_strain: float | None = None   # reject a step whose largest structural strain exceeds it
 
 
 @dataclass(frozen=True)
