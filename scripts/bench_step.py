@@ -40,7 +40,12 @@ SOLVERS = {
                "pc_hypre_boomeramg_P_max": 4, "pc_hypre_boomeramg_strong_threshold": 0.7}, "aij"),
 }
 # not in the default sweep: GAMG rebuilt only every 5th solve and reused in between
-EXTRA_SOLVERS = {"gamg-rebuild5": ({**SOLVERS["gamg"][0], "pc_rebuild_every": 5}, "aij")}
+EXTRA_SOLVERS = {
+    "gamg-rebuild5": ({**SOLVERS["gamg"][0], "pc_rebuild_every": 5}, "aij"),
+    # seed 000 §5.7: the reference preconditioner with a float32 matrix (numba, Python PC)
+    "sgs32": ({"ksp_type": "cg", "pc_type": "python",
+               "pc_python_type": "distcloth.linalg.sgs32.SinglePrecisionSGS"}, "baij"),
+}
 
 
 def worker(args):

@@ -151,6 +151,7 @@ def test_hanging_square_at_rest():
      "mg_levels_pc_type": "sor"},
     {"mat_type": "aij", "pc_type": "hypre"},
     {"mat_type": "baij", "pc_type": "jacobi", "pc_rebuild_every": 3, "warm_start": True},
+    {"pc_type": "python", "pc_python_type": "distcloth.linalg.sgs32.SinglePrecisionSGS"},
 ])
 def test_matrix_types_and_preconditioners_agree(solver):
     """BAIJ and AIJ go through the same blocked path: with a tight tolerance

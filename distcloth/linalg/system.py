@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .petsc import PREFIX, _libpetsc
+from .sgs32 import ATTR
 
 
 class SolverFailure(Exception):
@@ -79,6 +80,8 @@ class LinearSystem:
         self.A.setValuesBlockedCSR(self.indptr, self.gcols,
                                    np.ascontiguousarray(data.transpose(0, 2, 1)))
         self.A.assemble()
+        # the same blocks for preconditioners written in Python (sgs32)
+        self.A.setAttr(ATTR, (self.pattern.indptr, self.pattern.block_cols, data, self.n_owned))
 
     def configure(self) -> None:
         """Apply the options database to the KSP and set it up (first matrix must be set)."""
