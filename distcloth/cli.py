@@ -45,16 +45,18 @@ def build_parser() -> argparse.ArgumentParser:
                                 epilog="PETSc options (single dash) pass through, e.g. "
                                        "-distcloth_ksp_rtol 1e-8 or -log_view.")
     sub = p.add_subparsers(dest="command", required=True)
-    for name, help_ in (("run", "run a scene"), ("check", "validate a scene without running it")):
+    for name, help_ in (("run", "run a scene"), ("check", "validate a scene without running it"),
+                        ("drape", "relax a scene to its rest state (drape: section of the scene)")):
         s = sub.add_parser(name, help=help_, allow_abbrev=False)
         s.add_argument("scene", help="scene YAML file")
         s.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                        help="override a config value (checked like the file), e.g. time.step=0.01")
-        if name == "run":
+        if name in ("run", "drape"):
             s.add_argument("--output", help="HDF5 output file (default: output.file of the scene)")
+            s.add_argument("--quiet", action="store_true", help="no progress or summaries")
+        if name == "run":
             s.add_argument("--force", action="store_true",
                            help="run an explicit step above the stability limit anyway")
-            s.add_argument("--quiet", action="store_true", help="no progress or summaries")
     return p
 
 
@@ -97,6 +99,10 @@ def _main(args, comm, cmdline_options) -> int:
         return 2
     if args.command == "check":
         return run(cfg, comm, cmdline_options=cmdline_options, check_only=True)
+    if args.command == "drape":
+        from .run import drape
+        return drape(cfg, comm, output=args.output, cmdline_options=cmdline_options,
+                     quiet=args.quiet)
     return run(cfg, comm, output=args.output, force=args.force,
                cmdline_options=cmdline_options, quiet=args.quiet)
 

@@ -53,6 +53,27 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
     return sim, 0
 
 
+def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
+    """The run's result file, with what the run was (collective)."""
+    import numpy as np
+    from .io.h5writer import ResultWriter
+    lay = sim.layout
+    attrs = {
+        "scene": cfg.scene, "ranks": comm.size, "integrator": cfg.time.integrator,
+        "time_step": cfg.time.step,
+        "solver": sim.system.describe() if sim.system else "explicit",
+        "block_jacobi_blocks": int(comm.sum(np.array(
+            [sim.system.block_jacobi_blocks() if sim.system else 0]))[0]),
+        "rows_per_rank": [int(v) for v in 3 * (lay.ownership[1:] - lay.ownership[:-1])],
+        "edge_cut": lay.edge_cut, "imbalance": lay.imbalance, "cloth_size": sim.model.size(),
+        **extra_attrs,
+    }
+    return ResultWriter(path, comm.mpi_comm if comm.under_mpiexec else None,
+                        rest_positions=sim.model.rest_positions, triangles=sim.model.triangles,
+                        owned_input=lay.owned_input, part=lay.part, config_text=cfg.source_text,
+                        attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names)
+
+
 def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only=False,
         quiet=False, progress=True) -> int:
     t_start = time.perf_counter()
@@ -63,25 +84,12 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         log(comm, "check: the scene is valid")
         sim.destroy()
         return 0
-    from .io.h5writer import ResultWriter
     path = output or cfg.output.file
     h = cfg.time.step
     n_steps = max(1, int(round(cfg.time.end / h)))
     every = max(1, int(round(cfg.output.every / h)))
-    lay = sim.layout
-    attrs = {
-        "scene": cfg.scene, "ranks": comm.size, "integrator": cfg.time.integrator,
-        "time_step": h, "steps": n_steps, "output_every_steps": every,
-        "solver": sim.system.describe() if sim.system else "explicit",
-        "block_jacobi_blocks": int(comm.sum(__import__("numpy").array(
-            [sim.system.block_jacobi_blocks() if sim.system else 0]))[0]),
-        "rows_per_rank": [int(v) for v in 3 * (lay.ownership[1:] - lay.ownership[:-1])],
-        "edge_cut": lay.edge_cut, "imbalance": lay.imbalance, "cloth_size": sim.model.size(),
-    }
-    writer = ResultWriter(path, comm.mpi_comm if comm.under_mpiexec else None,
-                          rest_positions=sim.model.rest_positions, triangles=sim.model.triangles,
-                          owned_input=lay.owned_input, part=lay.part, config_text=cfg.source_text,
-                          attrs=attrs, stage_names=list(STAGES), diagnostic_names=list(DIAGNOSTICS))
+    writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
+                         {"steps": n_steps, "output_every_steps": every})
     log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
     sim.pipeline.run("output", writer)
     sim.pipeline.take_step_counters()
@@ -107,6 +115,58 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
         log(comm, f"{status} in {wall:.2f} s: {os.path.abspath(path)} "
                   f"(+ {os.path.splitext(os.path.basename(path))[0]}.xdmf for ParaView)")
+    _previews(cfg, comm, path)
+    sim.destroy()
+    return code
+
+
+def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
+    """``distcloth drape``: relax to the rest state (seed 004); a frame every
+    ``drape.frame_every`` iterations and the last; frame 'time' is the iteration."""
+    from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
+    t_start = time.perf_counter()
+    sim, code = setup(cfg, comm, cmdline_options=cmdline_options, quiet=quiet)
+    if code:
+        return code
+    spec = cfg.drape
+    path = output or cfg.output.file
+    writer = open_writer(sim, cfg, comm, path, list(DRAPE_DIAGNOSTICS),
+                         {"drape_method": spec.method, "drape_stop_on": spec.stop_on,
+                          "drape_tolerance": spec.tolerance})
+    log(comm, f"draping ({spec.method}) into {os.path.abspath(path)}: residual tolerance "
+              f"{spec.tolerance:g}, at most {spec.max_iterations} iterations")
+    relax = Relaxation(sim, spec)
+    writer.write_frame(0, 0.0, sim.owned_positions())
+    bar = Progress(comm, spec.max_iterations, enabled=not quiet)
+    status, code, k = "completed", 0, 0
+    try:
+        for k in range(1, spec.max_iterations + 1):
+            diag = relax.iterate()
+            times, calls = sim.pipeline.take_step_counters()
+            writer.write_step(k, float(k), diag, times, calls)
+            done = drape_converged(diag, spec)
+            if done or k % spec.frame_every == 0 or k == spec.max_iterations:
+                writer.write_frame(k, float(k), sim.owned_positions())
+            bar.update(k, float(k))
+            if done:
+                break
+        else:
+            raise SimulationError(k, f"drape did not converge in {spec.max_iterations} iterations "
+                                     f"(residual {diag['residual']:.3g} > {spec.tolerance:g})")
+    except SimulationError as exc:
+        log(comm, f"stopped: {exc}")
+        writer.record_error(exc.step, str(exc))
+        status, code = "failed", 1
+    writer.close(status)
+    _previews(cfg, comm, path)
+    if code == 0:
+        log(comm, f"converged in {k} iterations ({relax.stops} stops), residual "
+                  f"{diag['residual']:.3g}, {time.perf_counter() - t_start:.2f} s: {os.path.abspath(path)}")
+    sim.destroy()
+    return code
+
+
+def _previews(cfg, comm, path):
     if cfg.output.preview and comm.rank == 0:
         try:
             from .io.preview import write_previews
@@ -114,5 +174,3 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
                 log(comm, f"preview: {os.path.abspath(p)}")
         except Exception as exc:   # a picture must never turn a finished run into a failure
             log(comm, f"preview failed: {exc}")
-    sim.destroy()
-    return code

@@ -175,7 +175,7 @@ ERRORS = [
     ("time", {"stepp": 0.01},
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
-                      "gravity, drag, time, solver, output"),
+                      "gravity, drag, time, solver, output, drape"),
     ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
     ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
     ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
@@ -272,7 +272,7 @@ TIME_ALLOWED = f"no such key; allowed under time: {TIME_KEYS}"
 OVERRIDE_ERRORS = [
     ("time.stepp=0.1", f"time.stepp: 0.1 — {TIME_ALLOWED}"),
     ("nosuch.key=1", "nosuch.key: 1 — no such key; allowed under the top level: scene, cloth, "
-                     "effects, gravity, drag, time, solver, output"),
+                     "effects, gravity, drag, time, solver, output, drape"),
     ("cloth.2.name=x", "cloth.2.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.first.name=x", "cloth.first.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.0.pins.0.edge=top", "cloth.0.pins.0.edge: 'top' — cloth.0.pins is not in the "
@@ -302,7 +302,7 @@ def test_bad_overrides_name_their_path(scene_dir, override, expected):
 
 
 NOT_A_MAPPING = ("null — a YAML mapping with keys scene, cloth, effects, gravity, drag, time, "
-                 "solver, output")
+                 "solver, output, drape")
 
 
 @pytest.mark.parametrize("text, expected", [

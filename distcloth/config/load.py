@@ -20,9 +20,10 @@ import yaml
 
 from .checks import (exactly_one_of, format_value, join, read_bool, read_choice, read_float,
                      read_int, read_list, read_mapping, read_section, read_str, read_vector)
-from .schema import (DEFAULT_SOLVER, EFFECTS, GRID_CORNERS, GRID_EDGES, GRID_PATTERNS,
-                     INTEGRATORS, MAT_TYPES, MATERIAL_MODELS, ClothSpec, ConfigError, GridSpec,
-                     MaterialSpec, MeshSpec, OutputSpec, PinSpec, SceneConfig, TimeSpec)
+from .schema import (DEFAULT_SOLVER, DRAPE_METHODS, DRAPE_STOP_ON, EFFECTS, GRID_CORNERS,
+                     GRID_EDGES, GRID_PATTERNS, INTEGRATORS, MAT_TYPES, MATERIAL_MODELS,
+                     ClothSpec, ConfigError, DrapeSpec, GridSpec, MaterialSpec, MeshSpec,
+                     OutputSpec, PinSpec, SceneConfig, TimeSpec)
 
 # --- the key tree: every key a scene may hold --------------------------------
 # A dict lists the keys of a mapping, a one-element list is a list of such
@@ -46,8 +47,9 @@ CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": M
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
 OUTPUT_KEYS = _leaves("file", "every", "preview")
+DRAPE_KEYS = _leaves("method", "stop_on", "tolerance", "max_iterations", "frame_every")
 SCENE_KEYS = {"scene": LEAF, "cloth": [CLOTH_KEYS], **_leaves("effects", "gravity", "drag"),
-              "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS}
+              "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS, "drape": DRAPE_KEYS}
 
 MESH_SUFFIXES = (".obj", ".ply")
 OUTPUT_SUFFIXES = (".h5", ".hdf5")
@@ -110,7 +112,8 @@ def config_from_dict(raw: dict, base_dir: str, source_name: str) -> SceneConfig:
     time = _read_time(top.get("time"), "time")
     solver, mat_type, warm_start, rebuild = _read_solver(top.get("solver"), "solver")
     output = _read_output(top.get("output"), "output", time)
-    config = SceneConfig(scene=scene, cloth=cloth, effects=effects, gravity=gravity, drag=drag,
+    drape = _read_drape(top.get("drape"), "drape")
+    config = SceneConfig(drape=drape, scene=scene, cloth=cloth, effects=effects, gravity=gravity, drag=drag,
                          time=time, solver=solver, mat_type=mat_type, warm_start=warm_start, pc_rebuild_every=rebuild,
                          output=output)
     source_text = yaml.dump(config_to_dict(config), Dumper=_ResolvedDumper, sort_keys=False)
@@ -486,6 +489,19 @@ def _read_output(value: Any, key: str, time: TimeSpec) -> OutputSpec:
     )
 
 
+def _read_drape(value: Any, key: str) -> DrapeSpec:
+    section = read_section(value, key, DRAPE_KEYS)
+    d = DrapeSpec()
+    return DrapeSpec(
+        method=_optional(section, key, "method", d.method, read_choice, DRAPE_METHODS),
+        stop_on=_optional(section, key, "stop_on", d.stop_on, read_choice, DRAPE_STOP_ON),
+        tolerance=_optional(section, key, "tolerance", d.tolerance, read_float, above=0),
+        max_iterations=_optional(section, key, "max_iterations", d.max_iterations, read_int,
+                                 at_least=1),
+        frame_every=_optional(section, key, "frame_every", d.frame_every, read_int, at_least=1),
+    )
+
+
 def _read_output_file(value: Any, key: str) -> str:
     """Kept relative to the current directory, as given (normalised)."""
     allowed = "a file name ending in " + " or ".join(OUTPUT_SUFFIXES)
@@ -511,6 +527,7 @@ def config_to_dict(config: SceneConfig) -> dict:
         "solver": {**dict(config.solver), "mat_type": config.mat_type,
                    "warm_start": config.warm_start, "pc_rebuild_every": config.pc_rebuild_every},
         "output": dataclasses.asdict(config.output),
+        "drape": dataclasses.asdict(config.drape),
     }
 
 

@@ -17,6 +17,8 @@ GRID_EDGES = ("left", "right", "bottom", "top")
 GRID_CORNERS = ("bottom_left", "bottom_right", "top_left", "top_right")
 MATERIAL_MODELS = ("mass_spring",)
 MAT_TYPES = ("baij", "aij")
+DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
+DRAPE_STOP_ON = ("potential", "kinetic")
 
 # PETSc options a scene gets unless it says otherwise (seed 000 §5.6: CG with
 # block Jacobi over the ranks, SSOR on each block; BAIJ SOR allows only
@@ -99,6 +101,16 @@ class TimeSpec:
 
 
 @dataclass(frozen=True)
+class DrapeSpec:
+    """``distcloth drape`` (seed 004): relaxation to the rest state."""
+    method: str = "stop_and_go"
+    stop_on: str = "potential"    # zero all velocities at a potential-energy minimum, or a kinetic maximum
+    tolerance: float = 1.0e-3     # stop when every free vertex's force <= tolerance * its weight
+    max_iterations: int = 2000
+    frame_every: int = 10         # iterations between frames
+
+
+@dataclass(frozen=True)
 class OutputSpec:
     file: str = "out/result.h5"
     every: float = 0.1
@@ -118,6 +130,7 @@ class SceneConfig:
     warm_start: bool = False       # start each solve from the previous step's solution
     pc_rebuild_every: int = 1      # rebuild the preconditioner every k-th solve, reuse it between
     output: OutputSpec = field(default_factory=OutputSpec)
+    drape: DrapeSpec = field(default_factory=DrapeSpec)
     source_text: str = ""          # the resolved config as YAML, for the output file
 
     def has(self, effect: str) -> bool:
