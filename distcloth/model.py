@@ -43,6 +43,7 @@ class Model:
     pieces: list[PieceInfo] = field(default_factory=list)
     initial_positions: np.ndarray | None = None   # (n, 3); None: the rest shape
     initial_velocities: np.ndarray | None = None  # (n, 3); None: zero
+    hinge_vertices: np.ndarray | None = None      # (nh, 4) interior-edge hinges for hinge bending
 
     @property
     def num_vertices(self) -> int:
@@ -66,10 +67,23 @@ class Model:
         return float(np.linalg.norm(span))
 
     def matrix_graph(self) -> tuple[np.ndarray, np.ndarray]:
-        """Vertex adjacency of the system matrix (every spring couples its two
-        ends, flexion stencils included) as CSR (xadj, adjncy), no self loops."""
+        """Vertex adjacency of the system matrix (every spring, triangle and
+        hinge couples its vertices, flexion stencils included) as CSR (xadj,
+        adjncy), no self loops."""
         n = self.num_vertices
-        i, j = self.spring_vertices[:, 0], self.spring_vertices[:, 1]
+        # every element stencil couples all its vertex pairs: springs, triangles
+        # (membrane elements) and hinges (bending elements)
+        pairs = [self.spring_vertices]
+        stencils = [self.triangles]
+        if self.hinge_vertices is not None:
+            stencils.append(self.hinge_vertices)
+        for el in stencils:
+            nb = el.shape[1]
+            for a in range(nb):
+                for b in range(a + 1, nb):
+                    pairs.append(el[:, [a, b]])
+        allp = np.concatenate(pairs).astype(np.int64)
+        i, j = allp[:, 0], allp[:, 1]
         rows = np.concatenate([i, j])
         cols = np.concatenate([j, i])
         key = np.unique(rows * n + cols)

@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from .checks import (exactly_one_of, format_value, join, read_bool, read_choice, read_float,
@@ -23,7 +24,8 @@ from .checks import (exactly_one_of, format_value, join, read_bool, read_choice,
 from .schema import (DEFAULT_SOLVER, DRAPE_METHODS, DRAPE_STOP_ON, EFFECTS, GRID_CORNERS,
                      GRID_EDGES, GRID_PATTERNS, INTEGRATORS, MAT_TYPES, MATERIAL_MODELS,
                      ClothSpec, ConfigError, DrapeSpec, GridSpec, MaterialSpec, MeshSpec,
-                     OutputSpec, PinSpec, SceneConfig, TimeSpec)
+                     OutputSpec, PinSpec, SceneConfig, TimeSpec, BENDING_MODELS,
+                     STRAIN_MODELS)
 
 # --- the key tree: every key a scene may hold --------------------------------
 # A dict lists the keys of a mapping, a one-element list is a list of such
@@ -42,7 +44,9 @@ GRID_KEYS = _leaves("size", "resolution", "pattern")
 MESH_KEYS = {"grid": GRID_KEYS, **_leaves("file", "scale", "center", "rotation")}
 BOX_KEYS = _leaves("min", "max")
 PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS}
-MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping")
+MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping",
+                        "E_weft", "E_warp", "nu_weft", "nu_warp", "G", "strain", "weft",
+                        "bending_model")
 CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
@@ -374,14 +378,45 @@ def _read_indices(value: Any, key: str, mesh: MeshSpec) -> tuple[int, ...]:
 def _read_material(value: Any, key: str) -> MaterialSpec:
     section = read_section(value, key, MATERIAL_KEYS)
     d = DEFAULT_MATERIAL
-    return MaterialSpec(
+    material = MaterialSpec(
         model=_optional(section, key, "model", d.model, read_choice, MATERIAL_MODELS),
         density=_optional(section, key, "density", d.density, read_float, above=0),
         stretch=_optional(section, key, "stretch", d.stretch, read_float, above=0),
         shear=_optional(section, key, "shear", d.shear, read_float, at_least=0),
         bending=_optional(section, key, "bending", d.bending, read_float, at_least=0),
         damping=_optional(section, key, "damping", d.damping, read_float, at_least=0),
+        E_weft=_optional(section, key, "E_weft", d.E_weft, read_float, above=0),
+        E_warp=_optional(section, key, "E_warp", d.E_warp, read_float, above=0),
+        nu_weft=_optional(section, key, "nu_weft", d.nu_weft, read_float, at_least=0),
+        nu_warp=_optional(section, key, "nu_warp", d.nu_warp, read_float, at_least=0),
+        G=_optional(section, key, "G", d.G, read_float, above=0),
+        strain=_optional(section, key, "strain", d.strain, read_choice, STRAIN_MODELS),
+        weft=_optional(section, key, "weft", d.weft, _read_vec3),
+        bending_model=_optional(section, key, "bending_model", d.bending_model, read_choice,
+                                BENDING_MODELS),
     )
+    if material.model == "mass_spring":
+        for name in ("E_weft", "E_warp", "nu_weft", "nu_warp", "G", "bending_model"):
+            if section.get(name) is not None and not (name == "bending_model"
+                                                      and material.bending_model == "flexion"):
+                raise ConfigError(join(key, name), section[name],
+                                  "only with model: fem (mass_spring uses stretch, shear and "
+                                  "flexion springs)")
+    else:
+        if material.bending_model == "flexion":
+            raise ConfigError(join(key, "bending_model"), "flexion",
+                              "dihedral or isometric with model: fem")
+        e_weft, e_warp, nu_weft, nu_warp, _ = material.orthotropic()
+        # seed 000 Eq. 22 is symmetric only when nu_weft E_warp = nu_warp E_weft
+        if abs(nu_weft * e_warp - nu_warp * e_weft) > 1e-9 * max(nu_weft * e_warp, nu_warp * e_weft, 1e-300):
+            raise ConfigError(join(key, "nu_warp"), nu_warp,
+                              f"nu_warp = nu_weft * E_warp / E_weft = {nu_weft * e_warp / e_weft:.6g} "
+                              "(otherwise the stiffness of seed 000 Eq. 22 is not symmetric)")
+        if nu_weft * nu_warp >= 1.0:
+            raise ConfigError(join(key, "nu_warp"), nu_warp, "nu_weft * nu_warp < 1")
+        if float(np.linalg.norm(material.weft)) == 0.0:
+            raise ConfigError(join(key, "weft"), list(material.weft), "a non-zero direction")
+    return material
 
 
 def _read_effects(value: Any, key: str) -> tuple[str, ...]:
@@ -556,7 +591,8 @@ def _piece_to_dict(piece: ClothSpec) -> dict:
         "name": piece.name,
         "mesh": {**shape, "center": list(mesh.center), "rotation": list(mesh.rotation)},
         "pins": [_pin_to_dict(pin) for pin in piece.pins],
-        "material": dataclasses.asdict(piece.material),
+        "material": {k: (list(v) if isinstance(v, tuple) else v)
+                     for k, v in dataclasses.asdict(piece.material).items()},
     }
 
 

@@ -15,7 +15,9 @@ INTEGRATORS = ("backward_euler", "bdf2", "implicit_midpoint", "newmark",
 GRID_PATTERNS = ("regular", "alternating")
 GRID_EDGES = ("left", "right", "bottom", "top")
 GRID_CORNERS = ("bottom_left", "bottom_right", "top_left", "top_right")
-MATERIAL_MODELS = ("mass_spring",)
+MATERIAL_MODELS = ("mass_spring", "fem")
+STRAIN_MODELS = ("stvk", "corotated")
+BENDING_MODELS = ("flexion", "dihedral", "isometric")
 MAT_TYPES = ("baij", "aij")
 DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
 DRAPE_STOP_ON = ("potential", "kinetic")
@@ -72,6 +74,32 @@ class MaterialSpec:
     shear: float | None = None    # N/m, None: stretch / 10
     bending: float = 1.0e-6       # N*m
     damping: float = 0.0          # s
+    # model: fem (seed 000 §3.5-3.6): orthotropic plane stress, moduli times thickness in N/m;
+    # None: E_weft = stretch, E_warp = E_weft, nu_weft = 0.3, nu_warp = nu_weft E_warp / E_weft,
+    # G = E_weft / (2 (1 + nu_weft))
+    E_weft: float | None = None
+    E_warp: float | None = None
+    nu_weft: float | None = None
+    nu_warp: float | None = None
+    G: float | None = None
+    strain: str = "stvk"
+    weft: tuple[float, float, float] = (1.0, 0.0, 0.0)   # weft direction in the placed rest shape
+    bending_model: str | None = None   # None: flexion for mass_spring, dihedral for fem
+
+    def orthotropic(self) -> tuple[float, float, float, float, float]:
+        """(E_weft, E_warp, nu_weft, nu_warp, G) with the defaults filled in."""
+        e_weft = self.stretch if self.E_weft is None else self.E_weft
+        e_warp = e_weft if self.E_warp is None else self.E_warp
+        nu_weft = 0.3 if self.nu_weft is None else self.nu_weft
+        nu_warp = nu_weft * e_warp / e_weft if self.nu_warp is None else self.nu_warp
+        g = e_weft / (2.0 * (1.0 + nu_weft)) if self.G is None else self.G
+        return e_weft, e_warp, nu_weft, nu_warp, g
+
+    @property
+    def bending_kind(self) -> str:
+        if self.bending_model is not None:
+            return self.bending_model
+        return "flexion" if self.model == "mass_spring" else "dihedral"
 
     @property
     def shear_stiffness(self) -> float:

@@ -171,10 +171,17 @@ def build_terms(cfg, model, layout):
                           model.spring_stiffness[ids][sel], spring_weight[sel],
                           kind[sel] == STRUCTURAL)
 
+    material = cfg.cloth[0].material        # one law per scene (scene.build checks it)
     if cfg.has("membrane"):
-        terms.append(spring_term("force:membrane", [STRUCTURAL, SHEAR]))
+        if material.model == "fem":
+            terms.append(_fem_membrane(cfg, model, layout, material))
+        else:
+            terms.append(spring_term("force:membrane", [STRUCTURAL, SHEAR]))
     if cfg.has("bending"):
-        terms.append(spring_term("force:bending", [FLEXION]))
+        if material.bending_kind == "flexion":
+            terms.append(spring_term("force:bending", [FLEXION]))
+        else:
+            terms.append(_hinge_bending(cfg, model, layout, material.bending_kind))
     if cfg.has("damping"):
         sel = model.spring_damping[ids] > 0.0
         terms.append(SpringDampingTerm(lsp[sel], model.spring_rest_length[ids][sel],
@@ -185,3 +192,39 @@ def build_terms(cfg, model, layout):
 
 
 FORCE_STAGES = ("force:gravity", "force:membrane", "force:bending", "force:damping", "force:drag")
+
+
+def local_elements(elements: np.ndarray, layout):
+    """Elements with at least one owned vertex, in local numbering, and the
+    fraction of their vertices this rank owns (their energy weight)."""
+    to_local = np.full(layout.part.shape[0], -1, dtype=np.int64)
+    to_local[layout.local_input] = np.arange(layout.n_local)
+    el = to_local[elements]
+    owned = (el >= 0) & (el < layout.n_owned)
+    keep = owned.any(axis=1)
+    if np.any(el[keep] < 0):      # the ghost layer covers every matrix-graph neighbour
+        raise RuntimeError("an element with an owned vertex reaches beyond the ghost layer")
+    return el[keep], owned[keep].sum(axis=1) / elements.shape[1], np.nonzero(keep)[0]
+
+
+def _fem_membrane(cfg, model, layout, material):
+    from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress
+    tris, weight, _ = local_elements(model.triangles, layout)
+    C = orthotropic_plane_stress(*material.orthotropic())
+    weft = np.broadcast_to(np.asarray(material.weft, float), (tris.shape[0], 3))
+    rest = model.rest_positions[layout.local_input]
+    return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight)
+
+
+def _hinge_bending(cfg, model, layout, kind):
+    from .bending import DihedralBendingTerm, IsometricBendingTerm
+    hinges, weight, ids = local_elements(model.hinge_vertices, layout)
+    # each hinge takes the bending stiffness of the piece its edge belongs to
+    piece_of_vertex = np.zeros(model.num_vertices, dtype=np.int64)
+    for p, info in enumerate(model.pieces):
+        piece_of_vertex[info.vertex_start:info.vertex_stop] = p
+    B = np.array([spec.material.bending for spec in cfg.cloth])[
+        piece_of_vertex[model.hinge_vertices[ids, 0]]]
+    rest = model.rest_positions[layout.local_input]
+    term = (DihedralBendingTerm if kind == "dihedral" else IsometricBendingTerm)
+    return term(hinges, rest, B, weight)

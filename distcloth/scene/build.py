@@ -48,7 +48,11 @@ def build_model(cfg: SceneConfig) -> Model:
     if not cfg.cloth:
         raise ConfigError("cloth", [], "at least one cloth piece")
     bending_active = cfg.has("bending")
-    pieces = [_build_piece(p, spec, bending_active) for p, spec in enumerate(cfg.cloth)]
+    _check_one_continuum_material(cfg)
+    # continuum pieces keep their springs (unused by the fem terms) without the
+    # flexion correction, which belongs to the mass-spring model only
+    pieces = [_build_piece(p, spec, bending_active and spec.material.model == "mass_spring")
+              for p, spec in enumerate(cfg.cloth)]
 
     infos, vertex_start, triangle_start = [], 0, 0
     for spec, piece in zip(cfg.cloth, pieces):
@@ -73,12 +77,36 @@ def build_model(cfg: SceneConfig) -> Model:
                                   for spec, piece in zip(cfg.cloth, pieces)])
     rest_length = np.linalg.norm(positions[springs[:, 1]] - positions[springs[:, 0]], axis=1)
 
+    hinge_vertices = None
+    if any(spec.material.bending_kind != "flexion" for spec in cfg.cloth):
+        from ..physics.bending import hinges
+        try:
+            hinge_vertices = hinges(triangles)
+        except ValueError as exc:
+            raise ConfigError("cloth", "mesh", "hinge bending needs consistently oriented "
+                              f"triangles: {exc}") from None
     return Model(rest_positions=positions, triangles=triangles.astype(np.int64),
+                 hinge_vertices=hinge_vertices,
                  vertex_mass=vertex_mass, vertex_area=vertex_area,
                  spring_vertices=springs.astype(np.int64), spring_rest_length=rest_length,
                  spring_stiffness=stiffness, spring_damping=damping,
                  spring_kind=kind.astype(np.int8), pinned=pinned.astype(np.int64),
                  pieces=infos, initial_positions=None)
+
+
+def _check_one_continuum_material(cfg: SceneConfig) -> None:
+    """All pieces share the material model, strain and bending model, and fem
+    pieces one orthotropic law (one force term per effect; per-piece laws later)."""
+    first = cfg.cloth[0].material if cfg.cloth else None
+    for p, spec in enumerate(cfg.cloth[1:], start=1):
+        m = spec.material
+        same = (m.model == first.model and m.bending_kind == first.bending_kind
+                and (m.model != "fem" or (m.orthotropic() == first.orthotropic()
+                                          and m.strain == first.strain)))
+        if not same:
+            raise ConfigError(f"cloth.{p}.material", m.model,
+                              "the same model, strain, bending model and (fem) moduli as "
+                              "cloth.0.material: per-piece continuum laws are not supported yet")
 
 
 def _build_piece(p: int, spec: ClothSpec, bending_active: bool) -> _Piece:
