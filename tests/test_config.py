@@ -364,3 +364,23 @@ def test_the_raw_input_is_not_modified(scene_dir):
     before = copy.deepcopy(raw)
     config_from_dict(raw, str(scene_dir), "x.yaml")
     assert raw == before
+
+
+def test_fabric_presets(tmp_path):
+    """Every preset gives a valid continuum material, is marked with its source
+    (a citation or 'illustrative'), and single values override it."""
+    from distcloth.config.fabrics import FABRICS
+    from distcloth.config.load import config_from_dict
+    for name, values in FABRICS.items():
+        assert values["source"] == "illustrative" or "Table" in values["source"], name
+        raw = {"cloth": [{"mesh": {"grid": {"size": [1, 1], "resolution": [3, 3]}},
+                          "material": {"preset": name, "bending": 3e-5}}]}
+        m = config_from_dict(raw, str(tmp_path), "x.yaml").cloth[0].material
+        assert m.model == "fem" and m.preset == name and m.bending == 3e-5
+        assert m.density == values["density"] and m.E_weft == values["E_weft"]
+        e_weft, e_warp, nu_weft, nu_warp, _ = m.orthotropic()
+        assert abs(nu_weft * e_warp - nu_warp * e_weft) < 1e-12 * e_weft
+    bad = {"cloth": [{"mesh": {"grid": {"size": [1, 1], "resolution": [3, 3]}},
+                      "material": {"preset": "kevlar"}}]}
+    with pytest.raises(ConfigError, match="cloth.0.material.preset"):
+        config_from_dict(bad, str(tmp_path), "x.yaml")

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .fabrics import FABRICS
 from .checks import (exactly_one_of, format_value, join, read_bool, read_choice, read_float,
                      read_int, read_list, read_mapping, read_section, read_str, read_vector)
 from .schema import (DEFAULT_SOLVER, DRAPE_METHODS, DRAPE_STOP_ON, EFFECTS, GRID_CORNERS,
@@ -46,7 +47,7 @@ BOX_KEYS = _leaves("min", "max")
 PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS}
 MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping",
                         "E_weft", "E_warp", "nu_weft", "nu_warp", "G", "strain", "weft",
-                        "bending_model")
+                        "bending_model", "preset")
 CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
@@ -377,8 +378,17 @@ def _read_indices(value: Any, key: str, mesh: MeshSpec) -> tuple[int, ...]:
 
 def _read_material(value: Any, key: str) -> MaterialSpec:
     section = read_section(value, key, MATERIAL_KEYS)
+    preset = _optional(section, key, "preset", None, read_choice, tuple(FABRICS))
+    if preset is not None:
+        # the preset's values, a continuum membrane unless the scene says otherwise,
+        # and every value the scene gives on top
+        if section.get("model", "fem") != "fem":
+            raise ConfigError(join(key, "model"), section["model"],
+                              "fem with a preset (presets are continuum fabrics)")
+        base = {k: v for k, v in FABRICS[preset].items() if k != "source"}
+        section = {"model": "fem", **base, **{k: v for k, v in section.items() if v is not None}}
     d = DEFAULT_MATERIAL
-    material = MaterialSpec(
+    material = MaterialSpec(preset=preset, 
         model=_optional(section, key, "model", d.model, read_choice, MATERIAL_MODELS),
         density=_optional(section, key, "density", d.density, read_float, above=0),
         stretch=_optional(section, key, "stretch", d.stretch, read_float, above=0),

@@ -85,6 +85,7 @@ class MaterialSpec:
     strain: str = "stvk"
     weft: tuple[float, float, float] = (1.0, 0.0, 0.0)   # weft direction in the placed rest shape
     bending_model: str | None = None   # None: flexion for mass_spring, dihedral for fem
+    preset: str | None = None     # a named fabric (config/fabrics.py) the other values override
 
     def orthotropic(self) -> tuple[float, float, float, float, float]:
         """(E_weft, E_warp, nu_weft, nu_warp, G) with the defaults filled in."""
