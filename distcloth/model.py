@@ -44,6 +44,8 @@ class Model:
     initial_positions: np.ndarray | None = None   # (n, 3); None: the rest shape
     initial_velocities: np.ndarray | None = None  # (n, 3); None: zero
     hinge_vertices: np.ndarray | None = None      # (nh, 4) interior-edge hinges for hinge bending
+    slide_vertices: np.ndarray | None = None      # (ns,) vertices held only along an axis
+    slide_axes: np.ndarray | None = None          # (ns, 3) unit axes
 
     @property
     def num_vertices(self) -> int:

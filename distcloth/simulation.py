@@ -75,6 +75,15 @@ class Simulation:
         to_local[local] = np.arange(self.n_local)
         pl = to_local[model.pinned]
         self.pinned_local = np.sort(pl[pl >= 0])
+        # sliding pins: held along an axis only, S = I - a a^T
+        self.slide_local = np.zeros(0, dtype=np.int64)
+        self.slide_S = np.zeros((0, 3, 3))
+        if model.slide_vertices is not None and model.slide_vertices.size:
+            sl = to_local[model.slide_vertices]
+            mine = sl >= 0
+            a = model.slide_axes[mine]
+            self.slide_local = sl[mine]
+            self.slide_S = np.eye(3)[None] - np.einsum("ni,nj->nij", a, a)
         self.terms = build_terms(cfg, model, lay)
         self.pattern = BlockPattern(self.n_owned, self.n_local,
                                     [s for t in self.terms for s in t.stencils()])
@@ -125,7 +134,7 @@ class Simulation:
         """Collective checks before the first step: solver options, explicit stability."""
         if self.system is not None:
             from .linalg.petsc import insert_scene_options, unused_options
-            insert_scene_options(self.cfg.solver_options, self._cmdline)
+            self._inserted_options = insert_scene_options(self.cfg.solver_options, self._cmdline)
             self.forces(self.x, self.v, want_jac=True)
             data = self.assemble(alpha=self.h ** 2, beta=self.h)
             self.system.set_values(filter_system(self.pattern, data, np.zeros((self.n_owned, 3)),
@@ -251,16 +260,21 @@ class Simulation:
 
     # ---------------------------------------------------------------- stages
     def _kinematics(self, t_new):
-        """Prescribed velocities at t + h: static pins for now (moving pins and
-        colliders join here)."""
-        return np.zeros((self.pinned_local.size, 3))
+        """Prescribed velocities at t + h of the constrained vertices (pins, then
+        sliding pins): at rest for now (moving pins and colliders join here)."""
+        return np.zeros((self.pinned_local.size + self.slide_local.size, 3))
 
     def _constraints(self, target_velocity=None):
-        idx = self.pinned_local
+        """Pins (S = 0) and sliding pins (S = I - a a^T): z takes the constrained
+        directions of the velocity change to the target (at rest for now)."""
+        idx = np.concatenate([self.pinned_local, self.slide_local])
+        S = np.concatenate([np.zeros((self.pinned_local.size, 3, 3)), self.slide_S])
         if target_velocity is None:
             target_velocity = np.zeros((idx.size, 3))
-        S = np.zeros((idx.size, 3, 3))
-        return Constraints(idx, S, target_velocity - self.v[idx])
+        order = np.argsort(idx, kind="stable")
+        idx, S, target_velocity = idx[order], S[order], target_velocity[order]
+        z = np.einsum("nij,nj->ni", np.eye(3)[None] - S, target_velocity - self.v[idx])
+        return Constraints(idx, S, z)
 
     def _update(self, result):
         n = self.n_owned
@@ -388,6 +402,8 @@ class Simulation:
 
     def destroy(self):
         if self.system is not None:
+            from .linalg.petsc import remove_options
+            remove_options(getattr(self, "_inserted_options", []))
             self.system.destroy()
         self.ghosts.destroy()
 

@@ -44,7 +44,8 @@ def _leaves(*names: str) -> dict:
 GRID_KEYS = _leaves("size", "resolution", "pattern")
 MESH_KEYS = {"grid": GRID_KEYS, **_leaves("file", "scale", "center", "rotation")}
 BOX_KEYS = _leaves("min", "max")
-PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS}
+PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS, **_leaves("axis")}
+PIN_SELECTORS = ("edge", "corner", "indices", "box")
 MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping",
                         "E_weft", "E_warp", "nu_weft", "nu_warp", "G", "strain", "weft",
                         "bending_model", "preset")
@@ -336,13 +337,22 @@ def _read_pins(value: Any, key: str, mesh: MeshSpec) -> tuple[PinSpec, ...]:
         return ()
     if isinstance(value, dict):          # a single pin, as for cloth pieces
         value = [value]
-    read_list(value, key, "pins, each with one of " + ", ".join(PIN_KEYS))
+    read_list(value, key, "pins, each with one of " + ", ".join(PIN_SELECTORS))
     return tuple(_read_pin(pin, join(key, i), mesh) for i, pin in enumerate(value))
 
 
 def _read_pin(value: Any, key: str, mesh: MeshSpec) -> PinSpec:
     section = read_mapping(value, key, PIN_KEYS)
-    kind = exactly_one_of(section, key, PIN_KEYS)
+    # axis: hold the vertices only along this direction, free across it
+    axis = _optional(section, key, "axis", None, _read_vec3)
+    if axis is not None and float(np.linalg.norm(axis)) == 0.0:
+        raise ConfigError(join(key, "axis"), list(axis), "a non-zero direction")
+    pin = _read_pin_selection({k: v for k, v in section.items() if k != "axis"}, key, mesh)
+    return dataclasses.replace(pin, axis=axis)
+
+
+def _read_pin_selection(section: dict, key: str, mesh: MeshSpec) -> PinSpec:
+    kind = exactly_one_of(section, key, PIN_SELECTORS)
     entry, entry_key = section[kind], join(key, kind)
     if kind in ("edge", "corner"):
         if mesh.grid is None:
@@ -607,13 +617,14 @@ def _piece_to_dict(piece: ClothSpec) -> dict:
 
 
 def _pin_to_dict(pin: PinSpec) -> dict:
+    axis = {} if pin.axis is None else {"axis": list(pin.axis)}
     if pin.edge is not None:
-        return {"edge": pin.edge}
+        return {"edge": pin.edge, **axis}
     if pin.corner is not None:
-        return {"corner": pin.corner}
+        return {"corner": pin.corner, **axis}
     if pin.indices is not None:
-        return {"indices": list(pin.indices)}
-    return {"box": {"min": list(pin.box_min), "max": list(pin.box_max)}}
+        return {"indices": list(pin.indices), **axis}
+    return {"box": {"min": list(pin.box_min), "max": list(pin.box_max)}, **axis}
 
 
 # --- helpers ----------------------------------------------------------------------

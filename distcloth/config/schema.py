@@ -64,6 +64,7 @@ class PinSpec:
     indices: tuple[int, ...] | None = None
     box_min: tuple[float, float, float] | None = None
     box_max: tuple[float, float, float] | None = None
+    axis: tuple[float, float, float] | None = None   # hold only along this direction (sliding pin)
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,6 @@ import math
 
 import numpy as np
 
-from ..linalg.constraints import Constraints
-
 DRAPE_DIAGNOSTICS = ("potential_energy", "gravitational_energy", "elastic_energy",
                      "kinetic_energy", "residual", "stops", "ksp_iterations", "line_search_halvings")
 
@@ -61,9 +59,8 @@ class Relaxation:
     def residual(self):
         sim, n = self.sim, self.sim.n_owned
         f = sim.forces(sim.x, np.zeros_like(sim.v), want_jac=False)[:n]
-        free = np.ones(n, bool)
-        free[sim.pinned_local[sim.pinned_local < n]] = False
-        r = np.sqrt(np.einsum("ij,ij->i", f, f))[free] / self.weight[free]
+        f = sim.project(sim._constraints(), f)      # only the free directions count
+        r = np.sqrt(np.einsum("ij,ij->i", f, f)) / self.weight
         return float(sim.comm.max(np.array([np.max(r, initial=0.0)]))[0])
 
     # ------------------------------------------------------------ iteration
@@ -118,8 +115,7 @@ class Relaxation:
         self._zero_velocities()
         f = sim.forces(sim.x, sim.v, want_jac=True)
         data = sim.assemble(alpha=1.0, beta=0.0, gamma=self._eps)
-        pins = sim.pinned_local
-        cons = Constraints(pins, np.zeros((pins.size, 3, 3)), np.zeros((pins.size, 3)))
+        cons = sim._constraints()            # v = 0: the constrained directions stay put
         dx_owned, info = sim.solve(data, f[:n], cons)
         dx = sim.local_array(dx_owned)
         p0 = sum(self.energies())

@@ -46,16 +46,30 @@ def _libpetsc():
     return None
 
 
-def insert_scene_options(options: dict, from_command_line: set[str]) -> None:
-    """Put the scene's solver options into the database unless the command line set them."""
+def insert_scene_options(options: dict, from_command_line: set[str]) -> list[str]:
+    """Put the scene's solver options into the database unless the command line
+    set them; returns the names inserted, for ``remove_options`` when done."""
     from petsc4py import PETSc
     db = PETSc.Options()
+    inserted = []
     for key, value in options.items():
         if key in from_command_line:
             continue
         if isinstance(value, bool):
             value = "true" if value else "false"
         db.setValue(PREFIX + key, str(value))
+        inserted.append(PREFIX + key)
+    return inserted
+
+
+def remove_options(names: list[str]) -> None:
+    """Take a scene's options out again (dolfinx's rule: insert, apply, remove),
+    so a later scene in the same process starts from the command line only."""
+    from petsc4py import PETSc
+    db = PETSc.Options()
+    for name in names:
+        if db.hasName(name):
+            db.delValue(name)
 
 
 def command_line_options() -> set[str]:

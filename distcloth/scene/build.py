@@ -1,7 +1,7 @@
 """SceneConfig -> Model: place every piece, wire its springs, lump its mass."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -9,7 +9,7 @@ from ..config.schema import ClothSpec, ConfigError, SceneConfig
 from ..model import FLEXION, SHEAR, STRUCTURAL, Model, PieceInfo
 from . import grid as gridlib
 from .meshio import MeshFormatError, read_mesh
-from .pins import select_pins
+from .pins import select_pin_axes, select_pins
 from .placement import place
 from .springs import (check_triangle_mesh, flexion_stiffness, grid_spring_constants,
                       mesh_springs, mesh_structural_stiffness, triangle_areas)
@@ -28,6 +28,8 @@ class _Piece:
     kind: np.ndarray             # (ns,) int8
     pinned: np.ndarray           # piece-local
     grid_resolution: tuple[int, int] | None
+    slide_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    slide_axis: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def build_model(cfg: SceneConfig) -> Model:
@@ -69,6 +71,16 @@ def build_model(cfg: SceneConfig) -> Model:
     stiffness = np.concatenate([piece.stiffness for piece in pieces])
     kind = np.concatenate([piece.kind for piece in pieces])
     pinned = np.unique(np.concatenate([piece.pinned + o for piece, o in zip(pieces, offsets)]))
+    slide_index = np.concatenate([piece.slide_index + o for piece, o in zip(pieces, offsets)])
+    slide_axis = np.concatenate([piece.slide_axis for piece in pieces])
+    # a fully pinned vertex stays fully pinned; a vertex sliding along two axes is pinned
+    keep = ~np.isin(slide_index, pinned)
+    slide_index, slide_axis = slide_index[keep], slide_axis[keep]
+    uniq, counts = np.unique(slide_index, return_counts=True)
+    twice = uniq[counts > 1]
+    pinned = np.union1d(pinned, twice)
+    keep = ~np.isin(slide_index, twice)
+    slide_index, slide_axis = slide_index[keep], slide_axis[keep]
     # c = damping * k along each spring (docs/config.md)
     damping = np.concatenate([np.full(piece.springs.shape[0], spec.material.damping)
                               for spec, piece in zip(cfg.cloth, pieces)]) * stiffness
@@ -91,6 +103,7 @@ def build_model(cfg: SceneConfig) -> Model:
                  spring_vertices=springs.astype(np.int64), spring_rest_length=rest_length,
                  spring_stiffness=stiffness, spring_damping=damping,
                  spring_kind=kind.astype(np.int8), pinned=pinned.astype(np.int64),
+                 slide_vertices=slide_index.astype(np.int64), slide_axes=slide_axis,
                  pieces=infos, initial_positions=None)
 
 
@@ -119,6 +132,8 @@ def _build_piece(p: int, spec: ClothSpec, bending_active: bool) -> _Piece:
     else:
         raise ConfigError(f"{key}.mesh", None, "exactly one of grid, file")
     piece.pinned = select_pins(spec.pins, piece.positions, piece.grid_resolution, f"{key}.pins")
+    piece.slide_index, piece.slide_axis = select_pin_axes(spec.pins, piece.positions,
+                                                          piece.grid_resolution, f"{key}.pins")
     return piece
 
 

@@ -14,8 +14,24 @@ def select_pins(pins, positions: np.ndarray, grid_resolution, key: str) -> np.nd
     (nu, nv) for grids, None for file meshes; ``key``: ``cloth.<p>.pins``."""
     chosen = [np.zeros(0, dtype=np.int64)]
     for k, pin in enumerate(pins):
+        if pin.axis is not None:          # sliding pins: select_pin_axes
+            continue
         chosen.append(_select_one(pin, positions, grid_resolution, f"{key}.{k}"))
     return np.unique(np.concatenate(chosen))
+
+
+def select_pin_axes(pins, positions, grid_resolution, key: str):
+    """(indices, unit axes) of the sliding pins (``axis``); a vertex also fully
+    pinned, or sliding along two directions, is left to the full pins."""
+    idx, axes = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 3))]
+    for k, pin in enumerate(pins):
+        if pin.axis is None:
+            continue
+        sel = _select_one(pin, positions, grid_resolution, f"{key}.{k}")
+        a = np.asarray(pin.axis, float) / np.linalg.norm(pin.axis)
+        idx.append(sel)
+        axes.append(np.tile(a, (sel.shape[0], 1)))
+    return np.concatenate(idx), np.concatenate(axes)
 
 
 def _select_one(pin: PinSpec, positions, grid_resolution, key: str) -> np.ndarray:
