@@ -48,7 +48,7 @@ PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS, **_leaves("
 PIN_SELECTORS = ("edge", "corner", "indices", "box")
 MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping",
                         "E_weft", "E_warp", "nu_weft", "nu_warp", "G", "strain", "weft",
-                        "bending_model", "preset")
+                        "bending_model", "preset", "tension_weft", "tension_warp")
 CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
@@ -414,9 +414,12 @@ def _read_material(value: Any, key: str) -> MaterialSpec:
         weft=_optional(section, key, "weft", d.weft, _read_vec3),
         bending_model=_optional(section, key, "bending_model", d.bending_model, read_choice,
                                 BENDING_MODELS),
+        tension_weft=_optional(section, key, "tension_weft", None, _read_curve),
+        tension_warp=_optional(section, key, "tension_warp", None, _read_curve),
     )
     if material.model == "mass_spring":
-        for name in ("E_weft", "E_warp", "nu_weft", "nu_warp", "G", "bending_model"):
+        for name in ("E_weft", "E_warp", "nu_weft", "nu_warp", "G", "bending_model",
+                     "tension_weft", "tension_warp"):
             if section.get(name) is not None and not (name == "bending_model"
                                                       and material.bending_model == "flexion"):
                 raise ConfigError(join(key, name), section[name],
@@ -434,6 +437,10 @@ def _read_material(value: Any, key: str) -> MaterialSpec:
                               "(otherwise the stiffness of seed 000 Eq. 22 is not symmetric)")
         if nu_weft * nu_warp >= 1.0:
             raise ConfigError(join(key, "nu_warp"), nu_warp, "nu_weft * nu_warp < 1")
+        tabulated = material.tension_weft is not None or material.tension_warp is not None
+        if tabulated and material.strain != "stvk":
+            raise ConfigError(join(key, "strain"), material.strain,
+                              "stvk with tension_weft / tension_warp tables")
         if float(np.linalg.norm(material.weft)) == 0.0:
             raise ConfigError(join(key, "weft"), list(material.weft), "a non-zero direction")
     return material
@@ -544,6 +551,18 @@ def _read_output(value: Any, key: str, time: TimeSpec) -> OutputSpec:
     )
 
 
+def _read_curve(value: Any, key: str) -> tuple[tuple[float, float], ...]:
+    """[[e, S], ...]: at least two points, from [0, 0], e increasing, S increasing."""
+    allowed = "a list of [Green strain, stress N/m] pairs from [0, 0], both increasing"
+    read_list(value, key, allowed)
+    points = tuple(read_vector(p, join(key, i), 2, read_float, "numbers [e, S]")
+                   for i, p in enumerate(value))
+    if len(points) < 2 or points[0] != (0.0, 0.0) or any(
+            b[0] <= a[0] or b[1] <= a[1] for a, b in zip(points, points[1:])):
+        raise ConfigError(key, [list(p) for p in points], allowed)
+    return points
+
+
 def _read_drape(value: Any, key: str) -> DrapeSpec:
     section = read_section(value, key, DRAPE_KEYS)
     d = DrapeSpec()
@@ -611,9 +630,13 @@ def _piece_to_dict(piece: ClothSpec) -> dict:
         "name": piece.name,
         "mesh": {**shape, "center": list(mesh.center), "rotation": list(mesh.rotation)},
         "pins": [_pin_to_dict(pin) for pin in piece.pins],
-        "material": {k: (list(v) if isinstance(v, tuple) else v)
-                     for k, v in dataclasses.asdict(piece.material).items()},
+        "material": {k: _plain(v) for k, v in dataclasses.asdict(piece.material).items()},
     }
+
+
+def _plain(value):
+    """Tuples (nested) as lists, for YAML."""
+    return [_plain(v) for v in value] if isinstance(value, (tuple, list)) else value
 
 
 def _pin_to_dict(pin: PinSpec) -> dict:

@@ -87,6 +87,10 @@ class MaterialSpec:
     weft: tuple[float, float, float] = (1.0, 0.0, 0.0)   # weft direction in the placed rest shape
     bending_model: str | None = None   # None: flexion for mass_spring, dihedral for fem
     preset: str | None = None     # a named fabric (config/fabrics.py) the other values override
+    # fem + stvk: weft / warp direct stress (N/m) against Green strain, as [[e, S], ...]
+    # from [0, 0], e increasing (seed 000 Part 2 §1.3: measured curves, stiffening)
+    tension_weft: tuple[tuple[float, float], ...] | None = None
+    tension_warp: tuple[tuple[float, float], ...] | None = None
 
     def orthotropic(self) -> tuple[float, float, float, float, float]:
         """(E_weft, E_warp, nu_weft, nu_warp, G) with the defaults filled in."""

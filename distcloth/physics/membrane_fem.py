@@ -61,10 +61,15 @@ all 6x6 Hr (1.23 s on the 9x9 H) on top of the kernel, so in-kernel
 projection with the pre-tests is kept.  add_to_system 22 ms,
 stiffness_product 7 ms.
 
-Hook for nonlinear tension (not built): ``_energy_density`` is the one place
-mapping a strain vector to (W, dW/de, d2W/de2); a tabulated piecewise-linear
-stress-strain curve for the weft/warp direct stresses would replace the
-sigma = C eps step there (model code 2+), leaving the rest untouched.
+Nonlinear tension (seed 000 Part 2 §1.1, §1.3: weft and warp kept
+independent, each linear parameter replaced by a measured strain-stress
+curve, stiffening with strain): ``stvk`` with tables.  The weft and warp
+direct stresses are piecewise-linear functions S_d(e_d) of their Green
+strains (tables of (e, S) from (0, 0), increasing), extended with the last
+segment's slope beyond the table and the first segment's slope in
+compression; the energy W = Psi_u(e_u) + Psi_v(e_v) + C12 e_u e_v + ½ C33 g²
+(Psi_d' = S_d) keeps the Poisson coupling and shear of Eq. 22 and is C¹ with
+a piecewise-constant second derivative, so the Hessian stays exact.
 """
 from __future__ import annotations
 
@@ -75,7 +80,28 @@ from .terms import ForceTerm
 
 STVK = 0
 COROTATED = 1
+TABULATED = 2          # stvk with tabulated weft/warp direct stresses
 STRAIN_MODELS = {"stvk": STVK, "corotated": COROTATED}
+NO_TABLE = np.zeros((2, 2, 2))
+
+
+@njit(cache=True)
+def _tabulated(e, table):
+    """(Psi(e), S(e), dS/de) of a piecewise-linear S through table[:, 0] -> table[:, 1]."""
+    k = table.shape[0]
+    if e <= 0.0:
+        slope = (table[1, 1] - table[0, 1]) / (table[1, 0] - table[0, 0])
+        return 0.5 * slope * e * e, slope * e, slope
+    psi = 0.0
+    for i in range(k - 1):
+        e0, e1 = table[i, 0], table[i + 1, 0]
+        s0, s1 = table[i, 1], table[i + 1, 1]
+        slope = (s1 - s0) / (e1 - e0)
+        if e <= e1 or i == k - 2:
+            de = e - e0
+            return psi + s0 * de + 0.5 * slope * de * de, s0 + slope * de, slope
+        psi += 0.5 * (s0 + s1) * (e1 - e0)
+    return psi, 0.0, 0.0
 
 # fixed orthonormal basis of {y in R^3 : sum(y) = 0}, columns
 Q0 = np.array([[1.0 / np.sqrt(2.0), 1.0 / np.sqrt(6.0)],
@@ -160,12 +186,29 @@ def rest_frames(X, tris, weft=None):
 # ------------------------------------------------------------ numba kernels
 
 @njit(cache=True)
-def _energy_density(e, C, model, want_hess, sig, D, wk):
+def _energy_density(e, C, model, want_hess, sig, D, wk, tables):
     """W(e) per unit area; fills sig = dW/de (3,) and, with ``want_hess``,
     D = d2W/de2 (3,3).  ``wk`` (8, 3, 3) is scratch (no allocation per element).
 
     Returns (W, largest principal strain of the model's strain measure).
     Hook: a tabulated nonlinear tension law would replace sigma = C eps here."""
+    if model == TABULATED:
+        pu, su, du = _tabulated(e[0], tables[0])
+        pv, sv, dv = _tabulated(e[1], tables[1])
+        sig[0] = su + C[0, 1] * e[1]
+        sig[1] = sv + C[0, 1] * e[0]
+        sig[2] = C[2, 2] * e[2]
+        for m in range(3):
+            for q in range(3):
+                D[m, q] = 0.0
+        D[0, 0] = du
+        D[1, 1] = dv
+        D[0, 1] = C[0, 1]
+        D[1, 0] = C[0, 1]
+        D[2, 2] = C[2, 2]
+        W = pu + pv + C[0, 1] * e[0] * e[1] + 0.5 * C[2, 2] * e[2] * e[2]
+        h = 0.5 * (e[0] - e[1])
+        return W, 0.5 * (e[0] + e[1]) + np.sqrt(h * h + 0.25 * e[2] * e[2])
     if model == STVK:
         W = 0.0
         for m in range(3):
@@ -330,7 +373,7 @@ def _project_psd6(A):
 
 @njit(cache=True)
 def membrane_forces(x, tris, G, Rg, area, C, model, weight, want_jac, project,
-                    force, hr):
+                    force, hr, tables=NO_TABLE):
     """Accumulate membrane forces into ``force`` (n_local, 3).
 
     With ``want_jac`` fills ``hr`` (ne, 6, 6) with each element's Hessian in
@@ -364,7 +407,7 @@ def membrane_forces(x, tris, G, Rg, area, C, model, weight, want_jac, project,
         e[0] = 0.5 * (c00 - 1.0)
         e[1] = 0.5 * (c11 - 1.0)
         e[2] = c01
-        W, pm = _energy_density(e, C, model, want_jac, sig, D, wk)
+        W, pm = _energy_density(e, C, model, want_jac, sig, D, wk, tables)
         A = area[el]
         energy += W * A * weight[el]
         if pm > max_strain:
@@ -492,13 +535,21 @@ class MembraneFEMTerm(ForceTerm):
     name = "force:membrane"
 
     def __init__(self, triangles, rest_positions, weft, C, strain_model, weight,
-                 project=True):
+                 project=True, tables=None):
         if strain_model not in STRAIN_MODELS:
             raise ValueError(f"unknown strain model {strain_model!r}; "
                              f"choose from {sorted(STRAIN_MODELS)}")
         self.tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
         self.model = STRAIN_MODELS[strain_model]
         self.strain_model = strain_model
+        # tables: (weft (k, 2), warp (k, 2)) of (Green strain, direct stress N/m)
+        self.tables = NO_TABLE
+        if tables is not None:
+            if strain_model != "stvk":
+                raise ValueError("tabulated tension curves go with the stvk strain model")
+            k = max(len(tables[0]), len(tables[1]))
+            self.tables = np.array([_pad(np.asarray(t, float), k) for t in tables])
+            self.model = TABULATED
         self.C = np.ascontiguousarray(C, dtype=np.float64)
         self.weight = np.ascontiguousarray(np.broadcast_to(
             np.asarray(weight, dtype=np.float64), (self.tris.shape[0],)))
@@ -520,7 +571,7 @@ class MembraneFEMTerm(ForceTerm):
     def _run(self, x, force, want_jac):
         return membrane_forces(np.ascontiguousarray(x, dtype=np.float64), self.tris, self.G,
                                self.Rg, self.area, self.C, self.model, self.weight,
-                               want_jac, self.project, force, self.hr)
+                               want_jac, self.project, force, self.hr, self.tables)
 
     def evaluate(self, x, v, force, want_jac):
         energy, strain = self._run(x, force, want_jac)
@@ -538,3 +589,11 @@ class MembraneFEMTerm(ForceTerm):
 
     def element_hessians(self):
         return element_hessians(self.hr)
+
+
+def _pad(table, k):
+    """Repeat the last segment's slope to give every table k points (one array)."""
+    while table.shape[0] < k:
+        slope = (table[-1] - table[-2])
+        table = np.vstack([table, table[-1] + slope])
+    return table

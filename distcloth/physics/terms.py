@@ -213,7 +213,12 @@ def _fem_membrane(cfg, model, layout, material):
     C = orthotropic_plane_stress(*material.orthotropic())
     weft = np.broadcast_to(np.asarray(material.weft, float), (tris.shape[0], 3))
     rest = model.rest_positions[layout.local_input]
-    return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight)
+    tables = None
+    if material.tension_weft is not None or material.tension_warp is not None:
+        # a missing direction keeps the linear law of Eq. 22 (its C11 / C22 slope)
+        lin = lambda c: ((0.0, 0.0), (1.0, c))   # noqa: E731
+        tables = (material.tension_weft or lin(C[0, 0]), material.tension_warp or lin(C[1, 1]))
+    return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables)
 
 
 def _hinge_bending(cfg, model, layout, kind):
