@@ -130,8 +130,10 @@ def test_tabulated_kernel_is_consistent():
     tris = np.array([[0, 1, 3], [0, 3, 2]])
     C = orthotropic_plane_stress(100.0, 50.0, 0.3, 0.15, 20.0)
     term = MembraneFEMTerm(tris, X, None, C, "stvk", np.ones(2), project=False,
-                           tables=(CURVE, [[0.0, 0.0], [0.2, 8.0]]))
+                           tables=(CURVE, [[0.0, 0.0], [0.2, 8.0]],
+                                   [[0.0, 0.0], [0.01, 0.2], [0.1, 5.0]]))
     x = X * np.array([1.12, 0.97, 1.0]) + 0.002 * rng.normal(size=X.shape)
+    x[3, 0] += 0.004          # some shear, past the shear curve's first kink
     f = np.zeros_like(x)
     term.evaluate(x, None, f, True)
     h = 1e-7

@@ -48,7 +48,8 @@ PIN_KEYS = {**_leaves("edge", "corner", "indices"), "box": BOX_KEYS, **_leaves("
 PIN_SELECTORS = ("edge", "corner", "indices", "box")
 MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damping",
                         "E_weft", "E_warp", "nu_weft", "nu_warp", "G", "strain", "weft",
-                        "bending_model", "preset", "tension_weft", "tension_warp")
+                        "bending_model", "preset", "tension_weft", "tension_warp",
+                        "shear_curve")
 CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
@@ -416,10 +417,11 @@ def _read_material(value: Any, key: str) -> MaterialSpec:
                                 BENDING_MODELS),
         tension_weft=_optional(section, key, "tension_weft", None, _read_curve),
         tension_warp=_optional(section, key, "tension_warp", None, _read_curve),
+        shear_curve=_optional(section, key, "shear_curve", None, _read_curve),
     )
     if material.model == "mass_spring":
         for name in ("E_weft", "E_warp", "nu_weft", "nu_warp", "G", "bending_model",
-                     "tension_weft", "tension_warp"):
+                     "tension_weft", "tension_warp", "shear_curve"):
             if section.get(name) is not None and not (name == "bending_model"
                                                       and material.bending_model == "flexion"):
                 raise ConfigError(join(key, name), section[name],
@@ -437,10 +439,11 @@ def _read_material(value: Any, key: str) -> MaterialSpec:
                               "(otherwise the stiffness of seed 000 Eq. 22 is not symmetric)")
         if nu_weft * nu_warp >= 1.0:
             raise ConfigError(join(key, "nu_warp"), nu_warp, "nu_weft * nu_warp < 1")
-        tabulated = material.tension_weft is not None or material.tension_warp is not None
+        tabulated = any(c is not None for c in (material.tension_weft, material.tension_warp,
+                                                material.shear_curve))
         if tabulated and material.strain != "stvk":
             raise ConfigError(join(key, "strain"), material.strain,
-                              "stvk with tension_weft / tension_warp tables")
+                              "stvk with tension_weft / tension_warp / shear_curve tables")
         if float(np.linalg.norm(material.weft)) == 0.0:
             raise ConfigError(join(key, "weft"), list(material.weft), "a non-zero direction")
     return material

@@ -91,6 +91,7 @@ class MaterialSpec:
     # from [0, 0], e increasing (seed 000 Part 2 §1.3: measured curves, stiffening)
     tension_weft: tuple[tuple[float, float], ...] | None = None
     tension_warp: tuple[tuple[float, float], ...] | None = None
+    shear_curve: tuple[tuple[float, float], ...] | None = None   # shear stress vs shear strain 2E_uv
 
     def orthotropic(self) -> tuple[float, float, float, float, float]:
         """(E_weft, E_warp, nu_weft, nu_warp, G) with the defaults filled in."""

@@ -67,8 +67,8 @@ curve, stiffening with strain): ``stvk`` with tables.  The weft and warp
 direct stresses are piecewise-linear functions S_d(e_d) of their Green
 strains (tables of (e, S) from (0, 0), increasing), extended with the last
 segment's slope beyond the table and the first segment's slope in
-compression; the energy W = Psi_u(e_u) + Psi_v(e_v) + C12 e_u e_v + ½ C33 g²
-(Psi_d' = S_d) keeps the Poisson coupling and shear of Eq. 22 and is C¹ with
+compression; the energy W = Psi_u(e_u) + Psi_v(e_v) + C12 e_u e_v + Psi_s(|g|)
+(Psi_d' = S_d, the shear curve odd in g) keeps the Poisson coupling of Eq. 22 and is C¹ with
 a piecewise-constant second derivative, so the Hessian stays exact.
 """
 from __future__ import annotations
@@ -82,7 +82,7 @@ STVK = 0
 COROTATED = 1
 TABULATED = 2          # stvk with tabulated weft/warp direct stresses
 STRAIN_MODELS = {"stvk": STVK, "corotated": COROTATED}
-NO_TABLE = np.zeros((2, 2, 2))
+NO_TABLE = np.zeros((3, 2, 2))
 
 
 @njit(cache=True)
@@ -197,7 +197,9 @@ def _energy_density(e, C, model, want_hess, sig, D, wk, tables):
         pv, sv, dv = _tabulated(e[1], tables[1])
         sig[0] = su + C[0, 1] * e[1]
         sig[1] = sv + C[0, 1] * e[0]
-        sig[2] = C[2, 2] * e[2]
+        # shear: a curve of |gamma|, odd in gamma (no preferred shear sense)
+        ps, ss, ds = _tabulated(abs(e[2]), tables[2])
+        sig[2] = ss if e[2] >= 0.0 else -ss
         for m in range(3):
             for q in range(3):
                 D[m, q] = 0.0
@@ -205,8 +207,8 @@ def _energy_density(e, C, model, want_hess, sig, D, wk, tables):
         D[1, 1] = dv
         D[0, 1] = C[0, 1]
         D[1, 0] = C[0, 1]
-        D[2, 2] = C[2, 2]
-        W = pu + pv + C[0, 1] * e[0] * e[1] + 0.5 * C[2, 2] * e[2] * e[2]
+        D[2, 2] = ds
+        W = pu + pv + C[0, 1] * e[0] * e[1] + ps
         h = 0.5 * (e[0] - e[1])
         return W, 0.5 * (e[0] + e[1]) + np.sqrt(h * h + 0.25 * e[2] * e[2])
     if model == STVK:
@@ -542,12 +544,13 @@ class MembraneFEMTerm(ForceTerm):
         self.tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
         self.model = STRAIN_MODELS[strain_model]
         self.strain_model = strain_model
-        # tables: (weft (k, 2), warp (k, 2)) of (Green strain, direct stress N/m)
+        # tables: weft, warp (Green strain, direct stress N/m), shear (engineering
+        # shear strain 2 E_uv, shear stress N/m); each (k, 2) from (0, 0)
         self.tables = NO_TABLE
         if tables is not None:
             if strain_model != "stvk":
                 raise ValueError("tabulated tension curves go with the stvk strain model")
-            k = max(len(tables[0]), len(tables[1]))
+            k = max(len(t) for t in tables)
             self.tables = np.array([_pad(np.asarray(t, float), k) for t in tables])
             self.model = TABULATED
         self.C = np.ascontiguousarray(C, dtype=np.float64)

@@ -214,10 +214,11 @@ def _fem_membrane(cfg, model, layout, material):
     weft = np.broadcast_to(np.asarray(material.weft, float), (tris.shape[0], 3))
     rest = model.rest_positions[layout.local_input]
     tables = None
-    if material.tension_weft is not None or material.tension_warp is not None:
-        # a missing direction keeps the linear law of Eq. 22 (its C11 / C22 slope)
+    if any(t is not None for t in (material.tension_weft, material.tension_warp, material.shear_curve)):
+        # a missing curve keeps the linear law of Eq. 22 (its C11 / C22 / C33 slope)
         lin = lambda c: ((0.0, 0.0), (1.0, c))   # noqa: E731
-        tables = (material.tension_weft or lin(C[0, 0]), material.tension_warp or lin(C[1, 1]))
+        tables = (material.tension_weft or lin(C[0, 0]), material.tension_warp or lin(C[1, 1]),
+                  material.shear_curve or lin(C[2, 2]))
     return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables)
 
 
