@@ -1,6 +1,7 @@
 """SceneConfig -> Model: place every piece, wire its springs, lump its mass."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -147,8 +148,13 @@ def _grid_piece(spec: ClothSpec, bending_active: bool, key: str) -> _Piece:
     positions = place(gridlib.grid_vertices(grid.size, resolution),
                       spec.mesh.rotation, spec.mesh.center)
     families = gridlib.grid_springs(resolution)
+    material = spec.material
+    if material.model != "mass_spring":
+        # springs are unused by the continuum terms: derive harmless constants
+        # (no shear, no flexion correction) rather than refuse fem on long cells
+        material = dataclasses.replace(material, shear=0.0, bending=0.0)
     constants = grid_spring_constants(
-        spec.material, dx, dy, key=f"{key}.material",
+        material, dx, dy, key=f"{key}.material",
         flexion_u=bending_active and families["flexion_u"].shape[0] > 0,
         flexion_v=bending_active and families["flexion_v"].shape[0] > 0)
     names = gridlib.GRID_SPRING_FAMILIES
