@@ -107,7 +107,6 @@ class Simulation:
         self.h = cfg.time.step
         self._cmdline = cmdline_options or set()
         self._inject = _nan_injection(comm.rank)
-        self._last = None
         self.force_explicit = force_explicit
 
     # ---------------------------------------------------------------- set-up
@@ -173,7 +172,8 @@ class Simulation:
         limit, seed = self.explicit_step_limits()
         message = (f"explicit step limit: h < {limit:.4g} s (0.9*{self.integrator.stability_factor:.3g}"
                    f"/sqrt(lambda_max), Gershgorin); "
-                   f"seed 002 Eq. 4 gives {seed:.4g} s; h = {self.h:g} s")
+                   + (f"seed 002 Eq. 4 gives {seed:.4g} s" if math.isfinite(seed)
+                      else "seed 002 Eq. 4 does not apply (no springs)") + f"; h = {self.h:g} s")
         if self.h >= limit and self.force_explicit:
             log(self.comm, message + ": above the limit, running anyway because of --force")
         else:
@@ -186,26 +186,25 @@ class Simulation:
                               f"integrator, or --force")
 
     def _gershgorin_local(self) -> float:
-        """Row bound of M^-1 K at the rest state: each spring adds k to the
-        diagonal and k to one off-diagonal block norm of both its ends."""
-        rowsum = np.zeros(self.n_local)
-        for t in self.terms:
-            if hasattr(t, "k"):
-                for col in (0, 1):
-                    rowsum += np.bincount(t.springs[:, col], weights=2.0 * t.k, minlength=self.n_local)
-        return float(np.max(rowsum[: self.n_owned] / self.mass[: self.n_owned], initial=0.0))
+        """Gershgorin bound of M^-1 K at the rest state, from the assembled
+        stiffness of every enabled term (springs, FE membrane, hinges alike):
+        lambda_max <= max_i sum_j |K_ij| / m_i over this rank's scalar rows."""
+        rest = self.model.rest_positions[self.layout.local_input]
+        self.forces(rest, np.zeros_like(rest), want_jac=True)
+        data = self._assemble(1.0, 0.0, 0.0)            # -df/dx, no mass
+        rows = np.abs(data).sum(axis=2)                  # (nnzb, 3) scalar-row sums per block
+        rowsum = np.zeros((self.n_owned, 3))
+        for a in range(3):
+            rowsum[:, a] = np.bincount(self.pattern.block_rows, weights=rows[:, a],
+                                       minlength=self.n_owned)
+        return float(np.max(rowsum.max(axis=1) / self.mass[: self.n_owned], initial=0.0))
 
     # ---------------------------------------------------------- primitives
     def forces(self, x, v, want_jac: bool) -> np.ndarray:
         """Sum of the enabled force terms on every local row (each term is a stage)."""
         f = np.zeros((self.n_local, 3))
-        info = {}
         for name in FORCE_STAGES:
-            out = self.pipeline.run(name, x, v, f, want_jac)
-            if out:
-                for k, val in out.items():
-                    info[k] = max(info.get(k, 0.0), val) if k == "max_strain" else info.get(k, 0.0) + val
-        self._last = info
+            self.pipeline.run(name, x, v, f, want_jac)
         return f
 
     def stiffness_product(self, w) -> np.ndarray:

@@ -195,3 +195,11 @@ def test_rank_invariance_continuum_membrane(tmp_path, bending):
         frames[n] = read_frames(tmp_path / f"c{n}.h5")[0]
     L = 0.5 * math.sqrt(2.0)
     assert np.abs(frames[3] - frames[1]).max() <= 1e-8 * L
+
+
+def test_explicit_limit_covers_continuum_membrane(tmp_path):
+    # the Gershgorin bound comes from the assembled stiffness of every term, so an
+    # FE membrane is checked too (it once escaped a spring-only bound)
+    p = run_cli(["check", SQUARE, "--set", "time.integrator=rk4",
+                 "--set", "cloth.0.material={model: fem, density: 0.1, E_weft: 10.0}"], ranks=2)
+    assert p.returncode == 2 and "rk4 is unstable above" in p.stderr, p.stderr

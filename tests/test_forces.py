@@ -5,6 +5,8 @@ round-off O(1e-16 |f| / eps); with eps = 1e-6 on O(1) coordinates both are
 below 1e-8 relative, so 1e-6 relative agreement is a real check.
 """
 import numpy as np
+
+from fd import fd_jacobian as _fd_jacobian
 import pytest
 
 from distcloth.linalg.pattern import BlockPattern
@@ -35,18 +37,7 @@ def dense_system(term, n, springs, alpha, beta):
 
 
 def fd_jacobian(fun, z):
-    z = z.copy()
-    J = np.zeros((z.size, z.size))
-    flat = z.reshape(-1)
-    for q in range(z.size):
-        old = flat[q]
-        flat[q] = old + EPS
-        fp = fun(z).reshape(-1)
-        flat[q] = old - EPS
-        fm = fun(z).reshape(-1)
-        flat[q] = old
-        J[:, q] = (fp - fm) / (2 * EPS)
-    return J
+    return _fd_jacobian(fun, z, EPS)
 
 
 def spring_force(term, n):

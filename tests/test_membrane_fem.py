@@ -9,6 +9,8 @@ import itertools
 import time
 
 import numpy as np
+
+from fd import fd_jacobian as _fd_jacobian
 import pytest
 from scipy.linalg import sqrtm
 from scipy.spatial import Delaunay
@@ -62,18 +64,7 @@ def dense_system(term, n_owned, n, tris, alpha=1.0):
 
 
 def fd_jacobian(fun, z):
-    z = z.copy()
-    flat = z.reshape(-1)
-    cols = []
-    for q in range(z.size):
-        old = flat[q]
-        flat[q] = old + EPS
-        fp = fun(z).reshape(-1)
-        flat[q] = old - EPS
-        fm = fun(z).reshape(-1)
-        flat[q] = old
-        cols.append((fp - fm) / (2 * EPS))
-    return np.array(cols).T
+    return _fd_jacobian(fun, z, EPS)
 
 
 def force_fn(term, n):
