@@ -43,7 +43,9 @@ class Model:
     pieces: list[PieceInfo] = field(default_factory=list)
     initial_positions: np.ndarray | None = None   # (n, 3); None: the rest shape
     initial_velocities: np.ndarray | None = None  # (n, 3); None: zero
-    hinge_vertices: np.ndarray | None = None      # (nh, 4) interior-edge hinges for hinge bending
+    hinge_vertices: np.ndarray | None = None      # (nh, 4) interior-edge hinges (per-hinge bending)
+    shell_stencil: np.ndarray | None = None       # (nt, 6) triangle + opposite vertices (shell bending)
+    shell_present: np.ndarray | None = None       # (nt, 3) bool: the triangle's hinge i exists
     slide_vertices: np.ndarray | None = None      # (ns,) vertices held only along an axis
     slide_axes: np.ndarray | None = None          # (ns, 3) unit axes
 
@@ -69,8 +71,8 @@ class Model:
         return float(np.linalg.norm(span))
 
     def matrix_graph(self) -> tuple[np.ndarray, np.ndarray]:
-        """Vertex adjacency of the system matrix (every spring, triangle and
-        hinge couples its vertices, flexion stencils included) as CSR (xadj,
+        """Vertex adjacency of the system matrix (every spring, triangle, hinge
+        and shell stencil couples its vertices, flexion stencils included) as CSR (xadj,
         adjncy), no self loops."""
         n = self.num_vertices
         # every element stencil couples all its vertex pairs: springs, triangles
@@ -79,6 +81,8 @@ class Model:
         stencils = [self.triangles]
         if self.hinge_vertices is not None:
             stencils.append(self.hinge_vertices)
+        if self.shell_stencil is not None:
+            stencils.append(self.shell_stencil)
         for el in stencils:
             nb = el.shape[1]
             for a in range(nb):

@@ -283,3 +283,26 @@ def test_mesh_independence_fe_dihedral_converges():
     see test_cantilever_delaunay_mesh."""
     d = [cantilever(3.0, mesh, "dihedral")[0] for mesh in DELAUNAY]
     assert abs(d[2] - d[1]) < abs(d[1] - d[0])
+
+
+@pytest.mark.parametrize("bending_model", ["dihedral_shell", "isometric_shell"])
+def test_shell_bending_matches_elastica_on_the_split_square_grid(bending_model):
+    """Per-triangle curvature bending (bending_shell.py) on the square-cell grid
+    that leaves the per-hinge models 15-17 % too compliant: measured -0.11 %
+    (dihedral_shell, h = L/20) against the clamp-corrected elastica.  0.5 %
+    leaves room for the O(h^2) discretisation and the dihedral angle's
+    small-slope error, and is 30 times below the per-hinge defect."""
+    _, out = errors(3.0, [("grid", 20, 3, "regular"), ("grid", 40, 5, "regular")], bending_model)
+    for d, nom, cor in out:
+        assert abs(cor) <= 0.005, (d, nom, cor)
+
+
+def test_shell_bending_known_softness_on_other_meshes():
+    """KNOWN DEFECT, characterised (bending_shell.py docstring): hourglass modes.
+    Alternating grid h = L/20: measured +27 %; Delaunay h = 5, 2.5 mm: +4.5 %,
+    +5.3 % (no better with refinement).  Regression bounds, not a pass mark."""
+    _, out = errors(3.0, [("grid", 20, 3, "alternating")], "dihedral_shell")
+    assert 0.20 <= out[0][2] <= 0.35
+    _, out = errors(3.0, DELAUNAY[1:], "dihedral_shell")
+    for d, nom, cor in out:
+        assert 0.02 <= cor <= 0.08, (d, nom, cor)

@@ -430,7 +430,7 @@ def _read_material(value: Any, key: str) -> MaterialSpec:
     else:
         if material.bending_model == "flexion":
             raise ConfigError(join(key, "bending_model"), "flexion",
-                              "dihedral or isometric with model: fem")
+                              "dihedral, isometric, dihedral_shell or isometric_shell with model: fem")
         e_weft, e_warp, nu_weft, nu_warp, _ = material.orthotropic()
         # seed 000 Eq. 22 is symmetric only when nu_weft E_warp = nu_warp E_weft
         if abs(nu_weft * e_warp - nu_warp * e_weft) > 1e-9 * max(nu_weft * e_warp, nu_warp * e_weft, 1e-300):

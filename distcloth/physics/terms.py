@@ -223,14 +223,22 @@ def _fem_membrane(cfg, model, layout, material):
 
 
 def _hinge_bending(cfg, model, layout, kind):
+    """Per-hinge sums of bending.py for ``dihedral``/``isometric``; the
+    per-triangle curvature of bending_shell.py for ``*_shell``."""
     from .bending import DihedralBendingTerm, IsometricBendingTerm
-    hinges, weight, ids = local_elements(model.hinge_vertices, layout)
-    # each hinge takes the bending stiffness of the piece its edge belongs to
+    from .bending_shell import ShellDihedralBendingTerm, ShellIsometricBendingTerm
+    shell = kind in ("dihedral_shell", "isometric_shell")
+    elements = model.shell_stencil if shell else model.hinge_vertices
+    local, weight, ids = local_elements(elements, layout)
+    # each element takes the bending stiffness of the piece its first vertex belongs to
     piece_of_vertex = np.zeros(model.num_vertices, dtype=np.int64)
     for p, info in enumerate(model.pieces):
         piece_of_vertex[info.vertex_start:info.vertex_stop] = p
     B = np.array([spec.material.bending for spec in cfg.cloth])[
-        piece_of_vertex[model.hinge_vertices[ids, 0]]]
+        piece_of_vertex[elements[ids, 0]]]
     rest = model.rest_positions[layout.local_input]
-    term = (DihedralBendingTerm if kind == "dihedral" else IsometricBendingTerm)
-    return term(hinges, rest, B, weight)
+    if shell:
+        term = ShellDihedralBendingTerm if kind == "dihedral_shell" else ShellIsometricBendingTerm
+        return term(local, model.shell_present[ids], rest, B, weight)
+    term = DihedralBendingTerm if kind == "dihedral" else IsometricBendingTerm
+    return term(local, rest, B, weight)

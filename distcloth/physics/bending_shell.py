@@ -1,0 +1,451 @@
+"""Bending with a per-triangle curvature tensor built from its three hinges.
+
+Why not the per-hinge sums of ``bending.py``
+---------------------------------------------
+The hinge models of seed 000 Part 1 §4.3 (dihedral angle [BMF03], isometric
+[BWH*06]) add one independent term per hinge, sum_h c_h theta_h^2.  On a
+mesh whose hinges run in a few directions that sum is the quadratic form
+sum_d c_d (n_d^T K n_d)^2 of the curvature tensor K, which is not the
+isotropic plate energy: on the split-square grid it has no twist stiffness
+along the grid axes, so a bent strip relieves its diagonal hinges by
+twisting at the mesh scale and comes out 15-17 % too compliant at every
+resolution (tests/test_elastica.py; docs/mesh_independence.md).
+
+What is done here (a rotation-free shell triangle: Onate and Zarate 2000,
+"basic shell triangle"; Grinspun et al. 2006, "Computing discrete shape
+operators on general meshes"): each triangle T gets a curvature tensor K_T
+(2x2, in T's rest frame) from the bending of its (up to) three hinges, and
+the energy is the continuum one on it,
+
+    E = sum_T 1/2 B A_T |K_T|_F^2 = 1/2 B A_T (Kxx^2 + Kyy^2 + 2 Kxy^2),
+
+i.e. a plate with bending Poisson ratio 0: B (N.m) is the moment per unit
+width per unit curvature for a bend in any direction (Kawabata's strip
+rigidity) and the twist rigidity is B/2 per unit twist, so a strip's
+stiffness does not depend on whether it curls sideways.
+
+The hinge measure of K (exact for every quadratic surface, on any mesh)
+-------------------------------------------------------------------------
+For a piecewise-linear interpolant of a height f over a flat hinge, the jump
+of the normal derivative across the edge is sum_a w_a f_a with the cotangent
+stencil w = -k / |e| of Bergou et al. (``bending.hinge_rest_geometry``; sign
+below).  For f = 1/2 p^T K p (p the 2-D rest coordinates),
+
+    jump_i = sum_a w_a 1/2 p_a^T K p_a = 1/2 K : M_i,   M_i = sum_a w_a p_a p_a^T,
+
+exactly.  Written in the vector kappa = (Kxx, Kyy, sqrt2 Kxy) (so |K|_F =
+|kappa|), jump_i = c_i . kappa with c_i = 1/2 (Mxx, Myy, sqrt2 Mxy).  The
+dihedral angle of a hinge equals that jump to first order.  Triangle T has
+rows c_i for the hinges it has.  Interior triangles: three rows, kappa =
+C^-1 theta.  A triangle on a free edge has no neighbour there: by default
+(``free_edge="zero_curvature"``) the missing row is built from T's mirror
+image across the edge and its angle taken as 0 -- the curvature across a
+free edge vanishes, the natural condition M_nn = 0 of a plate with bending
+Poisson ratio 0; ``"min_norm"`` instead leaves the unmeasured curvature to
+minimise the energy, kappa = C^T (C C^T)^-1 theta.  Either way
+
+    E_T = 1/2 theta_T^T Q_T theta_T,   Q_T = B A_T [(C C^T)^-1 restricted to present hinges].
+
+Measured (tests/test_bending_shell.py, tests/test_elastica.py,
+docs/mesh_independence.md): exact on every quadratic surface on interior
+triangles of any mesh, and on the split-square grid with diagonals all one
+way the heavy cantilever matches the elastica to 0.1 % where the per-hinge
+sums are 15 % too compliant.  KNOWN DEFECT: consistency is not stability.
+On the alternating (checkerboard) grid an hourglass mode on the valence-4
+vertices makes the free plate's second eigenvalue 45 % low and the
+cantilever 27-45 % too compliant; on jittered Delaunay meshes the same kind
+of soft mode leaves it 4-6 % too compliant, not improving with refinement.
+A curvature-jump penalty between neighbouring triangles removes most of it
+but costs an 8-vertex stencil and a first-order bias at free edges (study in
+docs/mesh_independence.md); not adopted yet.  Hence these models are
+options (``dihedral_shell``, ``isometric_shell``) next to the per-hinge ones.
+
+The two models
+--------------
+* dihedral (nonlinear, large rotations): theta_i is the signed dihedral
+  angle of hinge i minus its rest angle (``bending.hinge_angle_gradient``,
+  Bridson et al. 2003's gradient).  Forces are exact; the system matrix is
+  the Gauss-Newton Hessian sum_ij Q_ij grad theta_i grad theta_j^T
+  (positive semi-definite since Q is); the dropped part sum_i (Q theta)_i
+  Hess theta_i vanishes at rest.
+* isometric (quadratic, constant Hessian; Bergou et al. 2006, Volino's linear
+  bending, seed 000 §4.3 Fig. 11c): theta_i is replaced by the vector jump
+  J_i = sum_a w_a x_a (for a flat hinge bent by theta, J = theta n + O(theta^2)),
+  E_T = 1/2 sum_ij Q_ij J_i . J_j.  The energy is a fixed quadratic form of
+  the positions, rotation invariant, zero for every affine map of a flat
+  rest shape (linear precision of w), Jacobian constant and exact.  Like
+  Bergou's it assumes a flat rest shape.
+
+Stencil layout: a row (v0, v1, v2, o0, o1, o2) per triangle, o_i the vertex
+across edge i = (v_{i+1}, v_{i+2}); a missing neighbour (free or non-manifold
+edge) repeats v_i there and its hinge is flagged absent (zero rows in Q).
+Hinge i of T is (v_{i+1}, v_{i+2}, v_i, o_i) in ``bending``'s hinge layout
+(edge as it runs in T, T first, neighbour second).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .bending import hinge_angle_gradient, hinge_angles
+from .terms import ForceTerm
+
+SQRT2 = np.sqrt(2.0)
+# stencil positions of hinge i of a triangle: edge (i+1, i+2), own vertex i, opposite 3+i
+HINGE_SLOTS = np.array([[1, 2, 0, 3], [2, 0, 1, 4], [0, 1, 2, 5]], dtype=np.int64)
+
+
+# --------------------------------------------------------------------------
+# topology and rest geometry (vectorised numpy)
+# --------------------------------------------------------------------------
+
+def shell_stencils(triangles) -> tuple[np.ndarray, np.ndarray]:
+    """(stencil (nt, 6) int64, present (nt, 3) bool) of a consistently oriented mesh.
+
+    Raises ValueError when two triangles run a shared edge the same way."""
+    tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    nt = tri.shape[0]
+    stencil = np.concatenate([tri, tri], axis=1)
+    present = np.zeros((nt, 3), dtype=bool)
+    if nt == 0:
+        return stencil, present
+    src = tri[:, [1, 2, 0]].ravel()           # edge i of triangle t runs v_{i+1} -> v_{i+2}
+    dst = tri[:, [2, 0, 1]].ravel()
+    n = int(tri.max()) + 1
+    key = np.minimum(src, dst) * n + np.maximum(src, dst)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    starts = np.flatnonzero(np.concatenate([[True], ks[1:] != ks[:-1]]))
+    counts = np.diff(np.concatenate([starts, [ks.shape[0]]]))
+    two = starts[counts == 2]                 # manifold interior edges only
+    a, b = order[two], order[two + 1]
+    if np.any(src[a] != dst[b]):
+        raise ValueError("shell_stencils: triangles are not consistently oriented")
+    ta, ia = a // 3, a % 3
+    tb, ib = b // 3, b % 3
+    stencil[ta, 3 + ia] = tri[tb, ib]
+    stencil[tb, 3 + ib] = tri[ta, ia]
+    present[ta, ia] = True
+    present[tb, ib] = True
+    return stencil, present
+
+
+def _rows(v):
+    return np.einsum("ij,ij->i", v, v)
+
+
+def _hinge_weights(p0, p1, p2, p3):
+    """Jump weights w (m, 4) of hinges (p0 -> p1, own p2, opposite p3), any
+    embedding: sum_a w_a f_a is the jump of the normal derivative of the
+    piecewise-linear f across the edge, positive for a convex-up fold.  w =
+    -k/|e| with Bergou's cotangent stencil k (see bending.py)."""
+    def cot(u, v):
+        return np.einsum("ij,ij->i", u, v) / np.linalg.norm(np.cross(u, v), axis=1)
+    ca0, ca1 = cot(p1 - p0, p2 - p0), cot(p0 - p1, p2 - p1)
+    cb0, cb1 = cot(p1 - p0, p3 - p0), cot(p0 - p1, p3 - p1)
+    k = np.stack([ca1 + cb1, ca0 + cb0, -ca0 - ca1, -cb0 - cb1], axis=1)
+    return -k / np.sqrt(_rows(p1 - p0))[:, None]
+
+
+def shell_rest_geometry(x_rest, stencil, present, stiffness, free_edge="zero_curvature"):
+    """Per triangle: Q (nt, 3, 3), rest angles theta0 (nt, 3), jump weights
+    W (nt, 3, 6) in stencil numbering (zero rows for absent hinges), area (nt,)."""
+    x = np.asarray(x_rest, dtype=np.float64)
+    nt = stencil.shape[0]
+    Bt = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (nt,))
+    v = x[stencil]                                  # (nt, 6, 3)
+    e1 = v[:, 1] - v[:, 0]
+    nrm = np.cross(e1, v[:, 2] - v[:, 0])
+    area = 0.5 * np.linalg.norm(nrm, axis=1)
+    nhat = nrm / (2.0 * area)[:, None]
+    ex = e1 / np.linalg.norm(e1, axis=1)[:, None]
+    ey = np.cross(nhat, ex)
+    own2 = np.stack([np.einsum("tj,tj->t", v[:, a] - v[:, 0], ex) for a in range(3)]
+                    + [np.einsum("tj,tj->t", v[:, a] - v[:, 0], ey) for a in range(3)],
+                    axis=1).reshape(nt, 2, 3).transpose(0, 2, 1)   # (nt, 3, 2)
+    C = np.zeros((nt, 3, 3))
+    W = np.zeros((nt, 3, 6))
+    theta0 = np.zeros((nt, 3))
+    for i in range(3):
+        s0, s1, s2, s3 = HINGE_SLOTS[i]
+        has = present[:, i]
+        a2, b2, c2 = own2[:, s0], own2[:, s1], own2[:, s2]
+        e2 = b2 - a2
+        le = np.linalg.norm(e2, axis=1)
+        e2 = e2 / le[:, None]
+        out = np.stack([e2[:, 1], -e2[:, 0]], axis=1)           # a normal of the edge in 2-D
+        flip = np.einsum("tj,tj->t", out, c2 - a2) > 0.0         # ... pointing away from T
+        out[flip] *= -1.0
+        # the opposite vertex in T's plane: the neighbour's, unfolded across edge i
+        # (rotated about the edge); for a free edge the mirror image of T's own
+        along = np.einsum("tj,tj->t", c2 - a2, e2)
+        away = np.abs(np.einsum("tj,tj->t", c2 - a2, out))
+        t = np.nonzero(has)[0]
+        e3 = v[t, s1] - v[t, s0]
+        r3 = v[t, s3] - v[t, s0]
+        along[t] = np.einsum("tj,tj->t", r3, e3) / le[t]
+        away[t] = np.linalg.norm(r3 - (along[t] / le[t])[:, None] * e3, axis=1)
+        q2 = a2 + along[:, None] * e2 + away[:, None] * out
+        P = np.stack([a2, b2, c2, q2], axis=1)                  # (nt, 4, 2)
+        P3 = np.concatenate([P, np.zeros((nt, 4, 1))], axis=2)
+        w = _hinge_weights(P3[:, 0], P3[:, 1], P3[:, 2], P3[:, 3])
+        M = np.einsum("ta,tap,taq->tpq", w, P, P)
+        C[:, i] = 0.5 * np.stack([M[:, 0, 0], M[:, 1, 1], SQRT2 * M[:, 0, 1]], axis=1)
+        for a, sl in enumerate((s0, s1, s2, s3)):
+            W[t, i, sl] += w[t, a]
+        theta0[t, i] = hinge_angles(x, stencil[t][:, [s0, s1, s2, s3]])
+    absent = ~present
+    if free_edge == "min_norm":
+        C[absent] = 0.0
+    G = np.einsum("tik,tjk->tij", C, C)
+    idx = np.arange(3)
+    if free_edge == "min_norm":
+        G[:, idx, idx] += absent                    # rows of absent hinges are 0: invert the rest
+    Q = np.linalg.pinv(G, rcond=1e-12, hermitian=True)
+    Q[np.repeat(absent[:, :, None], 3, axis=2)] = 0.0
+    Q[np.repeat(absent[:, None, :], 3, axis=1)] = 0.0
+    # kappa = C^T (C C^T)^+ d (present hinges), then K3 = R K R^T in 3-D rest
+    # coordinates (R = [ex ey]), as the 6-vector (xx, yy, zz, r2 xy, r2 xz, r2 yz)
+    kmap = np.einsum("tik,tij->tkj", C, Q)                  # (nt, 3 kappa, 3 hinges)
+    r2 = SQRT2
+    basis = np.stack([_sym6(ex, ex), _sym6(ey, ey), _sym6(ex, ey, r2)], axis=2)   # (nt, 6, 3)
+    kmap3 = np.einsum("tak,tkj->taj", basis, kmap)
+    Q *= (Bt * area)[:, None, None]
+    return np.ascontiguousarray(Q), theta0, np.ascontiguousarray(W), area, kmap3
+
+
+def _sym6(a, b, scale=1.0):
+    """The 3-D tensor scale * (a b^T + b a^T) / 2 (a = b: a a^T) of unit-vector
+    rows as Frobenius-isometric 6-vectors (xx, yy, zz, r2 xy, r2 xz, r2 yz); for
+    kappa_3 = Kxy the scale r2 makes (ex ey^T + ey ex^T) / r2 unit-norm."""
+    S = 0.5 * (a[:, :, None] * b[:, None, :] + b[:, :, None] * a[:, None, :]) * scale
+    r2 = SQRT2
+    return np.stack([S[:, 0, 0], S[:, 1, 1], S[:, 2, 2], r2 * S[:, 0, 1], r2 * S[:, 0, 2],
+                     r2 * S[:, 1, 2]], axis=1)
+
+
+# --------------------------------------------------------------------------
+# dihedral kernels
+# --------------------------------------------------------------------------
+
+@njit(cache=True)
+def shell_dihedral_forces(x, st, present, theta0, Q, weight, force, G):
+    """force += -sum_i (Q d)_i grad theta_i per triangle, d = theta - theta0.
+
+    Fills G (nt, 3, 6, 3) with grad theta_i in stencil numbering (zero for
+    absent hinges).  Returns (weighted energy, max |d|)."""
+    g = np.zeros((4, 3))
+    d = np.zeros(3)
+    energy = 0.0
+    worst = 0.0
+    for t in range(st.shape[0]):
+        G[t] = 0.0
+        for i in range(3):
+            d[i] = 0.0
+            if not present[t, i]:
+                continue
+            s0 = (i + 1) % 3
+            s1 = (i + 2) % 3
+            theta = hinge_angle_gradient(x, st[t, s0], st[t, s1], st[t, i], st[t, 3 + i], g)
+            d[i] = theta - theta0[t, i]
+            if abs(d[i]) > worst:
+                worst = abs(d[i])
+            for c in range(3):
+                G[t, i, s0, c] = g[0, c]
+                G[t, i, s1, c] = g[1, c]
+                G[t, i, i, c] = g[2, c]
+                G[t, i, 3 + i, c] = g[3, c]
+        e = 0.0
+        for i in range(3):
+            m = Q[t, i, 0] * d[0] + Q[t, i, 1] * d[1] + Q[t, i, 2] * d[2]
+            e += 0.5 * d[i] * m
+            if m == 0.0:
+                continue
+            for a in range(6):
+                j = st[t, a]
+                for c in range(3):
+                    force[j, c] -= m * G[t, i, a, c]
+        energy += e * weight[t]
+    return energy, worst
+
+
+@njit(cache=True)
+def shell_gn_product(st, G, Q, w, out):
+    """out += (df/dx) w = -sum_ij Q_ij grad theta_i (grad theta_j . w)."""
+    s = np.zeros(3)
+    for t in range(st.shape[0]):
+        for i in range(3):
+            acc = 0.0
+            for a in range(6):
+                j = st[t, a]
+                for c in range(3):
+                    acc += G[t, i, a, c] * w[j, c]
+            s[i] = acc
+        for i in range(3):
+            m = Q[t, i, 0] * s[0] + Q[t, i, 1] * s[1] + Q[t, i, 2] * s[2]
+            if m == 0.0:
+                continue
+            for a in range(6):
+                j = st[t, a]
+                for c in range(3):
+                    out[j, c] -= m * G[t, i, a, c]
+
+
+@njit(cache=True)
+def add_shell_gn_blocks(G, Q, alpha, slots, data):
+    """data[slot(a,b)] += alpha sum_ij Q_ij G_i[a] G_j[b]^T (slots (nt, 36), -1 skipped)."""
+    P = np.zeros((3, 6, 3))
+    for t in range(G.shape[0]):
+        for i in range(3):
+            for a in range(6):
+                for c in range(3):
+                    P[i, a, c] = (Q[t, i, 0] * G[t, 0, a, c] + Q[t, i, 1] * G[t, 1, a, c]
+                                  + Q[t, i, 2] * G[t, 2, a, c])
+        for a in range(6):
+            for b in range(6):
+                slot = slots[t, 6 * a + b]
+                if slot < 0:
+                    continue
+                for p in range(3):
+                    for q in range(3):
+                        acc = 0.0
+                        for i in range(3):
+                            acc += G[t, i, a, p] * P[i, b, q]
+                        data[slot, p, q] += alpha * acc
+
+
+# --------------------------------------------------------------------------
+# isometric kernels: E_T = 1/2 sum_ab H6_ab x_a . x_b, H6 = W^T Q W
+# --------------------------------------------------------------------------
+
+@njit(cache=True)
+def shell_isometric_forces(x, st, H6, weight, force):
+    energy = 0.0
+    y = np.zeros((6, 3))
+    for t in range(st.shape[0]):
+        e = 0.0
+        for a in range(6):
+            for c in range(3):
+                acc = 0.0
+                for b in range(6):
+                    acc += H6[t, a, b] * x[st[t, b], c]
+                y[a, c] = acc
+        for a in range(6):
+            j = st[t, a]
+            for c in range(3):
+                e += 0.5 * x[j, c] * y[a, c]
+                force[j, c] -= y[a, c]
+        energy += e * weight[t]
+    return energy
+
+
+@njit(cache=True)
+def shell_isometric_product(st, H6, w, out):
+    for t in range(st.shape[0]):
+        for a in range(6):
+            ja = st[t, a]
+            for b in range(6):
+                h = H6[t, a, b]
+                if h == 0.0:
+                    continue
+                jb = st[t, b]
+                out[ja, 0] -= h * w[jb, 0]
+                out[ja, 1] -= h * w[jb, 1]
+                out[ja, 2] -= h * w[jb, 2]
+
+
+@njit(cache=True)
+def add_shell_isometric_blocks(H6, alpha, slots, data):
+    for t in range(H6.shape[0]):
+        for a in range(6):
+            for b in range(6):
+                slot = slots[t, 6 * a + b]
+                if slot < 0:
+                    continue
+                val = alpha * H6[t, a, b]
+                data[slot, 0, 0] += val
+                data[slot, 1, 1] += val
+                data[slot, 2, 2] += val
+
+
+# --------------------------------------------------------------------------
+# force terms
+# --------------------------------------------------------------------------
+
+class _ShellTerm(ForceTerm):
+    name = "force:bending"
+
+    def __init__(self, stencil, present, rest, stiffness, weight):
+        self.stencil = np.ascontiguousarray(stencil, dtype=np.int64).reshape(-1, 6)
+        self.present = np.ascontiguousarray(present, dtype=np.bool_).reshape(-1, 3)
+        nt = self.stencil.shape[0]
+        self.weight = np.ascontiguousarray(np.broadcast_to(
+            np.asarray(weight, dtype=np.float64), (nt,)))
+        self.Q, self.theta0, self.W, self.area, self.kmap3 = shell_rest_geometry(
+            rest, self.stencil, self.present, stiffness)
+        self.slots = None
+
+    def stencils(self):
+        return [self.stencil]
+
+    def bind(self, pattern):
+        self.slots = pattern.slots_for(self.stencil)
+
+
+class ShellDihedralBendingTerm(_ShellTerm):
+    """Dihedral-angle bending (Bridson et al. 2003 angles and gradients) with the
+    per-triangle curvature energy of the module docstring; Gauss-Newton system
+    matrix (positive semi-definite, exact at rest)."""
+
+    def __init__(self, stencil, present, rest, stiffness, weight):
+        super().__init__(stencil, present, rest, stiffness, weight)
+        self.G = np.zeros((self.stencil.shape[0], 3, 6, 3))
+
+    def evaluate(self, x, v, force, want_jac):
+        energy, _ = shell_dihedral_forces(x, self.stencil, self.present, self.theta0, self.Q,
+                                          self.weight, force, self.G)
+        return {"elastic_energy": energy}
+
+    def stiffness_product(self, w, out):
+        shell_gn_product(self.stencil, self.G, self.Q, w, out)
+
+    def add_to_system(self, data, alpha, beta):
+        add_shell_gn_blocks(self.G, self.Q, alpha, self.slots, data)
+
+    def energy(self, x):
+        d = self.angles(x) - self.theta0
+        return 0.5 * float(np.sum(np.einsum("ti,tij,tj->t", d, self.Q, d) * self.weight))
+
+    def angles(self, x):
+        """Signed dihedral angles (nt, 3) of each triangle's hinges (0 where absent)."""
+        out = np.zeros((self.stencil.shape[0], 3))
+        for i in range(3):
+            t = np.nonzero(self.present[:, i])[0]
+            out[t, i] = hinge_angles(x, self.stencil[t][:, HINGE_SLOTS[i]])
+        return out
+
+
+class ShellIsometricBendingTerm(_ShellTerm):
+    """Quadratic isometric bending with the per-triangle curvature energy: constant,
+    exact Jacobian -H, H = sum_T (W^T Q W) (x) I3 (flat rest shape assumed;
+    ``rest_energy`` reports how far from flat the rest shape is)."""
+
+    def __init__(self, stencil, present, rest, stiffness, weight):
+        super().__init__(stencil, present, rest, stiffness, weight)
+        self.H6 = np.ascontiguousarray(np.einsum("tia,tij,tjb->tab", self.W, self.Q, self.W))
+        self.rest_energy = self.energy(np.asarray(rest, dtype=np.float64))
+
+    def evaluate(self, x, v, force, want_jac):
+        return {"elastic_energy": shell_isometric_forces(x, self.stencil, self.H6,
+                                                         self.weight, force)}
+
+    def stiffness_product(self, w, out):
+        shell_isometric_product(self.stencil, self.H6, w, out)
+
+    def add_to_system(self, data, alpha, beta):
+        add_shell_isometric_blocks(self.H6, alpha, self.slots, data)
+
+    def energy(self, x):
+        xs = np.asarray(x, dtype=np.float64)[self.stencil]          # (nt, 6, 3)
+        e = 0.5 * np.einsum("tac,tab,tbc->t", xs, self.H6, xs)
+        return float(np.sum(e * self.weight))
