@@ -46,6 +46,7 @@ class Model:
     hinge_vertices: np.ndarray | None = None      # (nh, 4) interior-edge hinges (per-hinge bending)
     shell_stencil: np.ndarray | None = None       # (nt, 6) triangle + opposite vertices (shell bending)
     shell_present: np.ndarray | None = None       # (nt, 3) bool: the triangle's hinge i exists
+    shell_jump_stencil: np.ndarray | None = None  # (ne, 12) neighbour pairs (curvature-jump penalty)
     slide_vertices: np.ndarray | None = None      # (ns,) vertices held only along an axis
     slide_axes: np.ndarray | None = None          # (ns, 3) unit axes
 
@@ -83,6 +84,8 @@ class Model:
             stencils.append(self.hinge_vertices)
         if self.shell_stencil is not None:
             stencils.append(self.shell_stencil)
+        if self.shell_jump_stencil is not None:
+            stencils.append(self.shell_jump_stencil)
         for el in stencils:
             nb = el.shape[1]
             for a in range(nb):

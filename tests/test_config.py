@@ -152,7 +152,7 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
     assert again == config
 
 
-THE_EFFECTS = "one of gravity | membrane | bending | damping | drag"
+THE_EFFECTS = "one of gravity | membrane | bending | damping | drag | collisions"
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
              "newmark_gamma, adaptive, max_halvings, max_strain")
 
@@ -182,11 +182,11 @@ ERRORS = [
     ("effects", ["gravity", "wind"], f"effects.1: 'wind' — {THE_EFFECTS}"),
     ("effects", ["drag", "drag"], "effects.1: 'drag' — each effect at most once"),
     ("effects", "gravity", "effects: 'gravity' — a list of effect names: gravity, membrane, "
-                           "bending, damping, drag"),
+                           "bending, damping, drag, collisions"),
     ("time", {"stepp": 0.01},
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
-                      "gravity, drag, time, solver, output, drape"),
+                      "gravity, drag, time, solver, output, drape, colliders"),
     ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
     ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
     ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
@@ -283,7 +283,7 @@ TIME_ALLOWED = f"no such key; allowed under time: {TIME_KEYS}"
 OVERRIDE_ERRORS = [
     ("time.stepp=0.1", f"time.stepp: 0.1 — {TIME_ALLOWED}"),
     ("nosuch.key=1", "nosuch.key: 1 — no such key; allowed under the top level: scene, cloth, "
-                     "effects, gravity, drag, time, solver, output, drape"),
+                     "effects, gravity, drag, time, solver, output, drape, colliders"),
     ("cloth.2.name=x", "cloth.2.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.first.name=x", "cloth.first.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.0.pins.0.edge=top", "cloth.0.pins.0.edge: 'top' — cloth.0.pins is not in the "
@@ -313,7 +313,7 @@ def test_bad_overrides_name_their_path(scene_dir, override, expected):
 
 
 NOT_A_MAPPING = ("null — a YAML mapping with keys scene, cloth, effects, gravity, drag, time, "
-                 "solver, output, drape")
+                 "solver, output, drape, colliders")
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -384,3 +384,77 @@ def test_fabric_presets(tmp_path):
                       "material": {"preset": "kevlar"}}]}
     with pytest.raises(ConfigError, match="cloth.0.material.preset"):
         config_from_dict(bad, str(tmp_path), "x.yaml")
+
+
+# --- colliders (collisions effect) ---------------------------------------------------
+
+def collider_scene(*colliders, effects=("gravity", "collisions")) -> dict:
+    raw = base_scene()
+    raw["effects"] = list(effects)
+    raw["colliders"] = list(colliders)
+    return raw
+
+
+SPHERE = {"name": "ball", "shape": "sphere", "center": [0, 0, 0], "radius": 0.25}
+
+
+def test_colliders_are_read_with_defaults_and_motion(scene_dir):
+    moving = {**SPHERE, "name": "m", "friction": 0.3, "thickness": 0.001,
+              "motion": {"times": [0, 1], "translations": [[0, 0, 0], [1, 0, 0]]}}
+    plane = {"name": "floor", "shape": "plane", "normal": [0, 0, 2], "offset": 0}
+    raw = collider_scene(SPHERE, moving, plane)
+    raw["cloth"][0]["thickness"] = 0.002
+    cfg = config_from_dict(raw, str(scene_dir), "scene.yaml")
+    ball, m, floor = cfg.colliders
+    assert (ball.shape, dict(ball.geometry), ball.friction, ball.thickness, ball.motion) == \
+        ("sphere", {"center": (0.0, 0.0, 0.0), "radius": 0.25}, 0.0, 0.0, None)
+    assert m.motion.times == (0.0, 1.0) and m.motion.rotations == ((0.0, 0.0, 0.0),) * 2
+    assert dict(floor.geometry)["normal"] == (0.0, 0.0, 2.0)
+    assert cfg.cloth[0].thickness == 0.002 and cfg.cloth[1].thickness == ClothSpec.thickness
+    # the resolved text reads back to the same configuration
+    again = config_from_dict(yaml.safe_load(cfg.source_text), str(scene_dir), "scene.yaml")
+    assert dataclasses.replace(again, source_text="") == dataclasses.replace(cfg, source_text="")
+
+
+def test_colliders_without_the_effect_are_still_checked(scene_dir):
+    cfg = config_from_dict(collider_scene(SPHERE, effects=("gravity",)), str(scene_dir), "s.yaml")
+    assert len(cfg.colliders) == 1 and not cfg.has("collisions")
+    bad = collider_scene({**SPHERE, "radius": 0}, effects=("gravity",))
+    assert error_line(bad, scene_dir).startswith("distcloth: config error: colliders.0.radius: 0")
+
+
+COLLIDER_ERRORS = [
+    ([], "effects: ['gravity', 'collisions'] — the collisions effect needs at least one entry"),
+    ([{**SPHERE, "radius": -1}], "colliders.0.radius: -1 — a finite number > 0"),
+    ([{**SPHERE, "shape": "cone"}], "colliders.0.shape: 'cone' — one of plane | sphere | capsule | box"),
+    ([{**SPHERE, "normal": [0, 0, 1]}], "colliders.0.normal: [0, 0, 1] — not a key of a sphere"),
+    ([{**SPHERE, "centre": [0, 0, 0]}], "colliders.0.centre: [0, 0, 0] — unknown key (did you mean center?)"),
+    ([{**SPHERE, "center": [0, 0]}], "colliders.0.center: [0, 0] — a list of 3 numbers"),
+    ([{"shape": "plane", "normal": [0, 0, 0], "offset": 0}],
+     "colliders.0.normal: [0.0, 0.0, 0.0] — a non-zero direction"),
+    ([{"shape": "plane", "normal": [0, 0, 1]}], "colliders.0.offset: null — required"),
+    ([{"shape": "box", "center": [0, 0, 0], "half_extents": [1, 0, 1]}],
+     "colliders.0.half_extents.1: 0 — a finite number > 0"),
+    ([{"shape": "capsule", "a": [0, 0, 0], "b": [1, 0, 0], "radius": 0.1, "friction": -0.1}],
+     "colliders.0.friction: -0.1 — a finite number >= 0"),
+    ([{**SPHERE, "thickness": -1e-3}], "colliders.0.thickness: -0.001 — a finite number >= 0"),
+    ([SPHERE, SPHERE], "colliders.1.name: 'ball' — a name no other collider has (colliders.0 has it)"),
+    ([{**SPHERE, "motion": {"times": [0, 1], "translations": [[0, 0, 0]]}}],
+     "colliders.0.motion.translations: [[0, 0, 0]] — a list of 2 [x, y, z] vectors"),
+    ([{**SPHERE, "motion": {"times": [1, 0]}}], "colliders.0.motion.times.1: 0.0 — a time > 1"),
+    ([{**SPHERE, "motion": {"times": [0, 1], "rotations": [[0, 0], [0, 0, 1]]}}],
+     "colliders.0.motion.rotations.0: [0, 0] — a list of 3 numbers"),
+]
+
+
+@pytest.mark.parametrize("colliders, expected", COLLIDER_ERRORS,
+                         ids=[e[1].split(":")[0] + str(i) for i, e in enumerate(COLLIDER_ERRORS)])
+def test_bad_colliders_name_their_key_path(scene_dir, colliders, expected):
+    assert error_line(collider_scene(*colliders), scene_dir).startswith(
+        "distcloth: config error: " + expected)
+
+
+def test_cloth_thickness_must_not_be_negative(scene_dir):
+    raw = set_path(base_scene(), "cloth.0.thickness", -0.001)
+    assert error_line(raw, scene_dir) == ("distcloth: config error: cloth.0.thickness: -0.001"
+                                          " — a finite number >= 0")

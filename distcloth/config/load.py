@@ -24,7 +24,8 @@ from .checks import (exactly_one_of, format_value, join, read_bool, read_choice,
                      read_int, read_list, read_mapping, read_section, read_str, read_vector)
 from .schema import (DEFAULT_SOLVER, DRAPE_METHODS, DRAPE_STOP_ON, EFFECTS, GRID_CORNERS,
                      GRID_EDGES, GRID_PATTERNS, INTEGRATORS, MAT_TYPES, MATERIAL_MODELS,
-                     ClothSpec, ConfigError, DrapeSpec, GridSpec, MaterialSpec, MeshSpec,
+                     COLLIDER_SHAPES, SHAPE_KEYS, ClothSpec, ColliderSpec, ConfigError,
+                     MotionSpec, DrapeSpec, GridSpec, MaterialSpec, MeshSpec,
                      OutputSpec, PinSpec, SceneConfig, TimeSpec, BENDING_MODELS,
                      STRAIN_MODELS)
 
@@ -50,13 +51,18 @@ MATERIAL_KEYS = _leaves("model", "density", "stretch", "shear", "bending", "damp
                         "E_weft", "E_warp", "nu_weft", "nu_warp", "G", "strain", "weft",
                         "bending_model", "preset", "tension_weft", "tension_warp",
                         "shear_curve")
-CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS}
+CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": MATERIAL_KEYS,
+              "thickness": LEAF}
+MOTION_KEYS = _leaves("times", "translations", "rotations")
+COLLIDER_KEYS = {**_leaves("name", "shape", "normal", "offset", "center", "radius", "a", "b",
+                           "half_extents", "friction", "thickness"), "motion": MOTION_KEYS}
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
 OUTPUT_KEYS = _leaves("file", "every", "preview")
 DRAPE_KEYS = _leaves("method", "stop_on", "tolerance", "max_iterations", "frame_every")
 SCENE_KEYS = {"scene": LEAF, "cloth": [CLOTH_KEYS], **_leaves("effects", "gravity", "drag"),
-              "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS, "drape": DRAPE_KEYS}
+              "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS, "drape": DRAPE_KEYS,
+              "colliders": [COLLIDER_KEYS]}
 
 MESH_SUFFIXES = (".obj", ".ply")
 OUTPUT_SUFFIXES = (".h5", ".hdf5")
@@ -120,7 +126,11 @@ def config_from_dict(raw: dict, base_dir: str, source_name: str) -> SceneConfig:
     solver, mat_type, warm_start, rebuild = _read_solver(top.get("solver"), "solver")
     output = _read_output(top.get("output"), "output", time)
     drape = _read_drape(top.get("drape"), "drape")
-    config = SceneConfig(drape=drape, scene=scene, cloth=cloth, effects=effects, gravity=gravity, drag=drag,
+    colliders = _read_colliders(top.get("colliders"), "colliders")
+    if "collisions" in effects and not colliders:
+        raise ConfigError("effects", list(effects),
+                          "the collisions effect needs at least one entry under colliders:")
+    config = SceneConfig(drape=drape, colliders=colliders, scene=scene, cloth=cloth, effects=effects, gravity=gravity, drag=drag,
                          time=time, solver=solver, mat_type=mat_type, warm_start=warm_start, pc_rebuild_every=rebuild,
                          output=output)
     source_text = yaml.dump(config_to_dict(config), Dumper=_ResolvedDumper, sort_keys=False)
@@ -280,6 +290,7 @@ def _read_piece(value: Any, key: str, index: int, base_dir: str) -> ClothSpec:
         mesh=mesh,
         pins=_read_pins(section.get("pins"), join(key, "pins"), mesh),
         material=_read_material(section.get("material"), join(key, "material")),
+        thickness=_optional(section, key, "thickness", ClothSpec.thickness, read_float, at_least=0),
     )
 
 
@@ -589,6 +600,94 @@ def _read_output_file(value: Any, key: str) -> str:
     return os.path.normpath(path)
 
 
+def _read_colliders(value: Any, key: str) -> tuple[ColliderSpec, ...]:
+    """Analytic colliders; checked whether or not the collisions effect is on."""
+    if value is None:
+        return ()
+    read_list(value, key, "colliders, each a mapping with name and shape")
+    out: list[ColliderSpec] = []
+    first: dict[str, int] = {}
+    for i, entry in enumerate(value):
+        spec = _read_collider(entry, join(key, i), i)
+        if spec.name in first:
+            raise ConfigError(join(join(key, i), "name"), spec.name,
+                              f"a name no other collider has (colliders.{first[spec.name]} has it)")
+        first[spec.name] = i
+        out.append(spec)
+    return tuple(out)
+
+
+def _read_collider(value: Any, key: str, index: int) -> ColliderSpec:
+    section = read_mapping(value, key, COLLIDER_KEYS)
+    name = _optional(section, key, "name", f"collider{index}", read_str)
+    shape = _required(section, key, "shape", "one of " + " | ".join(COLLIDER_SHAPES),
+                      read_choice, COLLIDER_SHAPES)
+    wanted = SHAPE_KEYS[shape]
+    for other in ("normal", "offset", "center", "radius", "a", "b", "half_extents"):
+        if other not in wanted and section.get(other) is not None:
+            raise ConfigError(join(key, other), section[other],
+                              f"not a key of a {shape}; a {shape} takes " + ", ".join(wanted))
+    geometry: list[tuple[str, Any]] = []
+    for name_ in wanted:
+        what = {"normal": "[x, y, z], non-zero", "offset": "a number in m (normal . y = offset)",
+                "center": "[x, y, z] in m", "radius": "a number > 0 in m",
+                "a": "[x, y, z] in m", "b": "[x, y, z] in m",
+                "half_extents": "[x, y, z], each > 0, in m"}[name_]
+        if name_ in ("normal", "center", "a", "b"):
+            v = _required(section, key, name_, what, _read_vec3)
+        elif name_ == "half_extents":
+            v = _required(section, key, name_, what, read_vector, 3, _read_positive, "numbers > 0")
+        elif name_ == "radius":
+            v = _required(section, key, name_, what, read_float, above=0)
+        else:
+            v = _required(section, key, name_, what, read_float)
+        if name_ == "normal" and float(np.linalg.norm(v)) == 0.0:
+            raise ConfigError(join(key, "normal"), list(v), "a non-zero direction")
+        geometry.append((name_, v))
+    return ColliderSpec(
+        name=name, shape=shape, geometry=tuple(geometry),
+        friction=_optional(section, key, "friction", ColliderSpec.friction, read_float, at_least=0),
+        thickness=_optional(section, key, "thickness", ColliderSpec.thickness, read_float,
+                            at_least=0),
+        motion=_optional(section, key, "motion", None, _read_motion))
+
+
+def _read_motion(value: Any, key: str) -> MotionSpec:
+    section = read_mapping(value, key, MOTION_KEYS)
+    times = _required(section, key, "times", "a non-empty list of increasing times in s",
+                      read_list, "times in s")
+    if not times:
+        raise ConfigError(join(key, "times"), times, "a non-empty list of increasing times in s")
+    times = tuple(read_float(t, join(join(key, "times"), i)) for i, t in enumerate(times))
+    for i in range(1, len(times)):
+        if not times[i] > times[i - 1]:
+            raise ConfigError(join(join(key, "times"), i), times[i],
+                              f"a time > {times[i - 1]:g} (times strictly increasing)")
+    k = len(times)
+    keyed = {}
+    for name_ in ("translations", "rotations"):
+        raw = section.get(name_)
+        if raw is None:
+            keyed[name_] = tuple((0.0, 0.0, 0.0) for _ in range(k))
+            continue
+        what = f"a list of {k} [x, y, z] vectors (one per time)"
+        if not isinstance(raw, list) or len(raw) != k:
+            raise ConfigError(join(key, name_), raw, what)
+        keyed[name_] = tuple(_read_vec3(v, join(join(key, name_), i)) for i, v in enumerate(raw))
+    return MotionSpec(times=times, **keyed)
+
+
+def _collider_to_dict(c: ColliderSpec) -> dict:
+    out = {"name": c.name, "shape": c.shape,
+           **{k: (list(v) if isinstance(v, tuple) else v) for k, v in c.geometry},
+           "friction": c.friction, "thickness": c.thickness}
+    if c.motion is not None:
+        out["motion"] = {"times": list(c.motion.times),
+                         "translations": [list(v) for v in c.motion.translations],
+                         "rotations": [list(v) for v in c.motion.rotations]}
+    return out
+
+
 # --- the resolved configuration as plain data -----------------------------------
 
 def config_to_dict(config: SceneConfig) -> dict:
@@ -605,6 +704,8 @@ def config_to_dict(config: SceneConfig) -> dict:
                    "warm_start": config.warm_start, "pc_rebuild_every": config.pc_rebuild_every},
         "output": dataclasses.asdict(config.output),
         "drape": dataclasses.asdict(config.drape),
+        **({"colliders": [_collider_to_dict(c) for c in config.colliders]}
+           if config.colliders else {}),
     }
 
 
@@ -634,6 +735,7 @@ def _piece_to_dict(piece: ClothSpec) -> dict:
         "mesh": {**shape, "center": list(mesh.center), "rotation": list(mesh.rotation)},
         "pins": [_pin_to_dict(pin) for pin in piece.pins],
         "material": {k: _plain(v) for k, v in dataclasses.asdict(piece.material).items()},
+        "thickness": piece.thickness,
     }
 
 

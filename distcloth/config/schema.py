@@ -9,7 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-EFFECTS = ("gravity", "membrane", "bending", "damping", "drag")
+EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions")
+COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box")
+# the geometry keys of each collider shape (all required)
+SHAPE_KEYS = {"plane": ("normal", "offset"), "sphere": ("center", "radius"),
+              "capsule": ("a", "b", "radius"), "box": ("center", "half_extents")}
 INTEGRATORS = ("backward_euler", "bdf2", "implicit_midpoint", "newmark",
                "symplectic_euler", "explicit_midpoint", "rk4")
 GRID_PATTERNS = ("regular", "alternating")
@@ -119,6 +123,26 @@ class ClothSpec:
     mesh: MeshSpec
     pins: tuple[PinSpec, ...] = ()
     material: MaterialSpec = field(default_factory=MaterialSpec)
+    thickness: float = 0.001      # m: contact offset of the cloth against colliders
+
+
+@dataclass(frozen=True)
+class MotionSpec:
+    """Rigid keyframes of a collider (colliders.RigidMotion): times in s,
+    translations in m, rotations as rotation vectors in rad."""
+    times: tuple[float, ...] = ()
+    translations: tuple[tuple[float, float, float], ...] = ()
+    rotations: tuple[tuple[float, float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class ColliderSpec:
+    name: str
+    shape: str
+    geometry: tuple[tuple[str, Any], ...]    # the shape's keys (SHAPE_KEYS) and values
+    friction: float = 0.0
+    thickness: float = 0.0
+    motion: MotionSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -166,6 +190,7 @@ class SceneConfig:
     pc_rebuild_every: int = 1      # rebuild the preconditioner every k-th solve, reuse it between
     output: OutputSpec = field(default_factory=OutputSpec)
     drape: DrapeSpec = field(default_factory=DrapeSpec)
+    colliders: tuple[ColliderSpec, ...] = ()
     source_text: str = ""          # the resolved config as YAML, for the output file
 
     def has(self, effect: str) -> bool:

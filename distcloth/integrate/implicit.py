@@ -77,6 +77,7 @@ class ImplicitScheme(Integrator):
                 dv[:n] += delta
                 sim.ghosts.update(dv)
                 newton_its += 1
+        self.position_gain = aff.a_x      # dx1/dv1, for a post-solve velocity change
         x1, v1 = self.final(sim, h, aff, dv)
         return StepResult(x=x1, v=v1, newton_iterations=newton_its, ksp_iterations=ksp_its,
                           ksp_residual=ksp_res, newton_residual=rel)
@@ -99,6 +100,7 @@ class ImplicitMidpoint(ImplicitScheme):
     def final(self, sim, h, aff, dv):
         n = sim.n_owned
         v1 = sim.v[:n] + dv[:n]
+        self.position_gain = 0.5 * h
         return sim.x[:n] + 0.5 * h * (sim.v[:n] + v1), v1
 
 

@@ -55,10 +55,14 @@ On the alternating (checkerboard) grid an hourglass mode on the valence-4
 vertices makes the free plate's second eigenvalue 45 % low and the
 cantilever 27-45 % too compliant; on jittered Delaunay meshes the same kind
 of soft mode leaves it 4-6 % too compliant, not improving with refinement.
-A curvature-jump penalty between neighbouring triangles removes most of it
-but costs an 8-vertex stencil and a first-order bias at free edges (study in
-docs/mesh_independence.md); not adopted yet.  Hence these models are
-options (``dihedral_shell``, ``isometric_shell``) next to the per-hinge ones.
+Hence the curvature-jump penalty
+1/2 gamma B A_e |K_T1 - K_T2|_F^2 (A_e = (A_T1 + A_T2)/3) between
+neighbouring triangles that both have three hinges: zero on quadratic
+surfaces (consistency kept), stiff on hourglass modes; gamma = JUMP_GAMMA =
+10 from scripts/shell_bending_study.py.  With it the heavy cantilever is
+within 2.5 % of the elastica on split-square, alternating and Delaunay
+meshes (tests/test_elastica.py).  Cost: an extra 12-entry element per such
+pair (wider matrix stencil and ghost layer).
 
 The two models
 --------------
@@ -225,46 +229,50 @@ def _sym6(a, b, scale=1.0):
 
 
 # --------------------------------------------------------------------------
-# dihedral kernels
+# kernels for an element with nh hinges over an s-vertex stencil:
+# E = 1/2 d^T Q d, d the hinge angle deviations (dihedral) -- or, isometric,
+# E = 1/2 sum_ab H_ab x_a . x_b with H = W^T Q W.  hs (nh, 4): the stencil
+# positions of each hinge (edge start, edge end, own vertex, opposite vertex).
 # --------------------------------------------------------------------------
 
 @njit(cache=True)
-def shell_dihedral_forces(x, st, present, theta0, Q, weight, force, G):
-    """force += -sum_i (Q d)_i grad theta_i per triangle, d = theta - theta0.
+def shell_dihedral_forces(x, st, hs, present, theta0, Q, weight, force, G):
+    """force += -sum_i (Q d)_i grad theta_i per element, d = theta - theta0.
 
-    Fills G (nt, 3, 6, 3) with grad theta_i in stencil numbering (zero for
+    Fills G (ne, nh, s, 3) with grad theta_i in stencil numbering (zero for
     absent hinges).  Returns (weighted energy, max |d|)."""
+    nh = hs.shape[0]
+    ns = st.shape[1]
     g = np.zeros((4, 3))
-    d = np.zeros(3)
+    d = np.zeros(nh)
     energy = 0.0
     worst = 0.0
     for t in range(st.shape[0]):
         G[t] = 0.0
-        for i in range(3):
+        for i in range(nh):
             d[i] = 0.0
             if not present[t, i]:
                 continue
-            s0 = (i + 1) % 3
-            s1 = (i + 2) % 3
-            theta = hinge_angle_gradient(x, st[t, s0], st[t, s1], st[t, i], st[t, 3 + i], g)
+            theta = hinge_angle_gradient(x, st[t, hs[i, 0]], st[t, hs[i, 1]], st[t, hs[i, 2]],
+                                         st[t, hs[i, 3]], g)
             d[i] = theta - theta0[t, i]
             if abs(d[i]) > worst:
                 worst = abs(d[i])
-            for c in range(3):
-                G[t, i, s0, c] = g[0, c]
-                G[t, i, s1, c] = g[1, c]
-                G[t, i, i, c] = g[2, c]
-                G[t, i, 3 + i, c] = g[3, c]
+            for a in range(4):
+                for c in range(3):
+                    G[t, i, hs[i, a], c] += g[a, c]
         e = 0.0
-        for i in range(3):
-            m = Q[t, i, 0] * d[0] + Q[t, i, 1] * d[1] + Q[t, i, 2] * d[2]
+        for i in range(nh):
+            m = 0.0
+            for j in range(nh):
+                m += Q[t, i, j] * d[j]
             e += 0.5 * d[i] * m
             if m == 0.0:
                 continue
-            for a in range(6):
-                j = st[t, a]
+            for a in range(ns):
+                k = st[t, a]
                 for c in range(3):
-                    force[j, c] -= m * G[t, i, a, c]
+                    force[k, c] -= m * G[t, i, a, c]
         energy += e * weight[t]
     return energy, worst
 
@@ -272,80 +280,86 @@ def shell_dihedral_forces(x, st, present, theta0, Q, weight, force, G):
 @njit(cache=True)
 def shell_gn_product(st, G, Q, w, out):
     """out += (df/dx) w = -sum_ij Q_ij grad theta_i (grad theta_j . w)."""
-    s = np.zeros(3)
+    nh = G.shape[1]
+    ns = st.shape[1]
+    s = np.zeros(nh)
     for t in range(st.shape[0]):
-        for i in range(3):
+        for i in range(nh):
             acc = 0.0
-            for a in range(6):
-                j = st[t, a]
+            for a in range(ns):
+                k = st[t, a]
                 for c in range(3):
-                    acc += G[t, i, a, c] * w[j, c]
+                    acc += G[t, i, a, c] * w[k, c]
             s[i] = acc
-        for i in range(3):
-            m = Q[t, i, 0] * s[0] + Q[t, i, 1] * s[1] + Q[t, i, 2] * s[2]
+        for i in range(nh):
+            m = 0.0
+            for j in range(nh):
+                m += Q[t, i, j] * s[j]
             if m == 0.0:
                 continue
-            for a in range(6):
-                j = st[t, a]
+            for a in range(ns):
+                k = st[t, a]
                 for c in range(3):
-                    out[j, c] -= m * G[t, i, a, c]
+                    out[k, c] -= m * G[t, i, a, c]
 
 
 @njit(cache=True)
 def add_shell_gn_blocks(G, Q, alpha, slots, data):
-    """data[slot(a,b)] += alpha sum_ij Q_ij G_i[a] G_j[b]^T (slots (nt, 36), -1 skipped)."""
-    P = np.zeros((3, 6, 3))
+    """data[slot(a,b)] += alpha sum_ij Q_ij G_i[a] G_j[b]^T (slots (ne, s*s), -1 skipped)."""
+    nh = G.shape[1]
+    ns = G.shape[2]
+    P = np.zeros((nh, ns, 3))
     for t in range(G.shape[0]):
-        for i in range(3):
-            for a in range(6):
+        for i in range(nh):
+            for a in range(ns):
                 for c in range(3):
-                    P[i, a, c] = (Q[t, i, 0] * G[t, 0, a, c] + Q[t, i, 1] * G[t, 1, a, c]
-                                  + Q[t, i, 2] * G[t, 2, a, c])
-        for a in range(6):
-            for b in range(6):
-                slot = slots[t, 6 * a + b]
+                    acc = 0.0
+                    for j in range(nh):
+                        acc += Q[t, i, j] * G[t, j, a, c]
+                    P[i, a, c] = acc
+        for a in range(ns):
+            for b in range(ns):
+                slot = slots[t, ns * a + b]
                 if slot < 0:
                     continue
                 for p in range(3):
                     for q in range(3):
                         acc = 0.0
-                        for i in range(3):
+                        for i in range(nh):
                             acc += G[t, i, a, p] * P[i, b, q]
                         data[slot, p, q] += alpha * acc
 
 
-# --------------------------------------------------------------------------
-# isometric kernels: E_T = 1/2 sum_ab H6_ab x_a . x_b, H6 = W^T Q W
-# --------------------------------------------------------------------------
-
 @njit(cache=True)
-def shell_isometric_forces(x, st, H6, weight, force):
+def shell_isometric_forces(x, st, H, weight, force):
+    ns = st.shape[1]
     energy = 0.0
-    y = np.zeros((6, 3))
+    y = np.zeros((ns, 3))
     for t in range(st.shape[0]):
         e = 0.0
-        for a in range(6):
+        for a in range(ns):
             for c in range(3):
                 acc = 0.0
-                for b in range(6):
-                    acc += H6[t, a, b] * x[st[t, b], c]
+                for b in range(ns):
+                    acc += H[t, a, b] * x[st[t, b], c]
                 y[a, c] = acc
-        for a in range(6):
-            j = st[t, a]
+        for a in range(ns):
+            k = st[t, a]
             for c in range(3):
-                e += 0.5 * x[j, c] * y[a, c]
-                force[j, c] -= y[a, c]
+                e += 0.5 * x[k, c] * y[a, c]
+                force[k, c] -= y[a, c]
         energy += e * weight[t]
     return energy
 
 
 @njit(cache=True)
-def shell_isometric_product(st, H6, w, out):
+def shell_isometric_product(st, H, w, out):
+    ns = st.shape[1]
     for t in range(st.shape[0]):
-        for a in range(6):
+        for a in range(ns):
             ja = st[t, a]
-            for b in range(6):
-                h = H6[t, a, b]
+            for b in range(ns):
+                h = H[t, a, b]
                 if h == 0.0:
                     continue
                 jb = st[t, b]
@@ -355,14 +369,15 @@ def shell_isometric_product(st, H6, w, out):
 
 
 @njit(cache=True)
-def add_shell_isometric_blocks(H6, alpha, slots, data):
-    for t in range(H6.shape[0]):
-        for a in range(6):
-            for b in range(6):
-                slot = slots[t, 6 * a + b]
+def add_shell_isometric_blocks(H, alpha, slots, data):
+    ns = H.shape[1]
+    for t in range(H.shape[0]):
+        for a in range(ns):
+            for b in range(ns):
+                slot = slots[t, ns * a + b]
                 if slot < 0:
                     continue
-                val = alpha * H6[t, a, b]
+                val = alpha * H[t, a, b]
                 data[slot, 0, 0] += val
                 data[slot, 1, 1] += val
                 data[slot, 2, 2] += val
@@ -372,24 +387,102 @@ def add_shell_isometric_blocks(H6, alpha, slots, data):
 # force terms
 # --------------------------------------------------------------------------
 
-class _ShellTerm(ForceTerm):
-    name = "force:bending"
+JUMP_GAMMA = 10.0
+"""Weight of the curvature-jump penalty (module docstring): measured on the
+linear cantilever, scripts/shell_bending_study.py."""
+JUMP_SLOTS = np.concatenate([HINGE_SLOTS, HINGE_SLOTS + 6])
 
-    def __init__(self, stencil, present, rest, stiffness, weight):
-        self.stencil = np.ascontiguousarray(stencil, dtype=np.int64).reshape(-1, 6)
-        self.present = np.ascontiguousarray(present, dtype=np.bool_).reshape(-1, 3)
-        nt = self.stencil.shape[0]
+
+def shell_jump_stencils(stencil, present) -> np.ndarray:
+    """(ne, 12): the two 6-stencils of each pair of neighbouring triangles that
+    both have all three hinges (the penalty's elements)."""
+    full = present.all(axis=1)
+    tri = stencil[:, :3]
+    if tri.shape[0] == 0:
+        return np.zeros((0, 12), dtype=np.int64)
+    src, dst = tri[:, [1, 2, 0]].ravel(), tri[:, [2, 0, 1]].ravel()
+    n = int(tri.max()) + 1
+    key = np.minimum(src, dst) * n + np.maximum(src, dst)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    starts = np.flatnonzero(np.concatenate([[True], ks[1:] != ks[:-1]]))
+    two = starts[np.diff(np.concatenate([starts, [ks.shape[0]]])) == 2]
+    t1, t2 = order[two] // 3, order[two + 1] // 3
+    keep = full[t1] & full[t2]
+    return np.concatenate([stencil[t1[keep]], stencil[t2[keep]]], axis=1).astype(np.int64)
+
+
+class _Group:
+    """Elements of one kind: stencil (ne, s), hinge slots hs (nh, 4), present
+    (ne, nh), rest angles, Q (ne, nh, nh), jump weights W (ne, nh, s), energy weights."""
+
+    def __init__(self, stencil, hs, present, theta0, Q, W, weight):
+        self.stencil = np.ascontiguousarray(stencil, dtype=np.int64)
+        self.hs = np.ascontiguousarray(hs, dtype=np.int64)
+        self.present = np.ascontiguousarray(present, dtype=np.bool_)
+        self.theta0 = np.ascontiguousarray(theta0, dtype=np.float64)
+        self.Q = np.ascontiguousarray(Q, dtype=np.float64)
+        self.W = np.ascontiguousarray(W, dtype=np.float64)
         self.weight = np.ascontiguousarray(np.broadcast_to(
-            np.asarray(weight, dtype=np.float64), (nt,)))
-        self.Q, self.theta0, self.W, self.area, self.kmap3 = shell_rest_geometry(
-            rest, self.stencil, self.present, stiffness)
+            np.asarray(weight, dtype=np.float64), (self.stencil.shape[0],)))
+        self.H = np.ascontiguousarray(np.einsum("tia,tij,tjb->tab", self.W, self.Q, self.W))
+        self.G = np.zeros((self.stencil.shape[0], hs.shape[0], self.stencil.shape[1], 3))
         self.slots = None
 
+    def angles(self, x):
+        out = np.zeros(self.present.shape)
+        for i in range(self.hs.shape[0]):
+            t = np.nonzero(self.present[:, i])[0]
+            out[t, i] = hinge_angles(x, self.stencil[t][:, self.hs[i]])
+        return out
+
+
+def _jump_group(jump_stencil, rest, stiffness, weight, gamma):
+    """Penalty 1/2 gamma B A_e |K_T1 - K_T2|_F^2, A_e = (A_T1 + A_T2) / 3, as a
+    quadratic form in the six hinge deviations of the two triangles."""
+    ne = jump_stencil.shape[0]
+    ones = np.ones((ne, 3), dtype=bool)
+    _, th1, W1, A1, K1 = shell_rest_geometry(rest, jump_stencil[:, :6], ones, 1.0)
+    _, th2, W2, A2, K2 = shell_rest_geometry(rest, jump_stencil[:, 6:], ones, 1.0)
+    D = np.concatenate([K1, -K2], axis=2)                       # (ne, 6, 6)
+    Bt = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (ne,))
+    Q = (gamma * Bt * (A1 + A2) / 3.0)[:, None, None] * np.einsum("tki,tkj->tij", D, D)
+    W = np.zeros((ne, 6, 12))
+    W[:, :3, :6] = W1
+    W[:, 3:, 6:] = W2
+    return _Group(jump_stencil, JUMP_SLOTS, np.ones((ne, 6), dtype=bool),
+                  np.concatenate([th1, th2], axis=1), Q, W, weight)
+
+
+class _ShellTerm(ForceTerm):
+    """Per-triangle curvature energy, plus (``jump`` = (stencils (ne, 12),
+    stiffness, weight, gamma)) the curvature-jump penalty between neighbours."""
+    name = "force:bending"
+
+    def __init__(self, stencil, present, rest, stiffness, weight, jump=None):
+        stencil = np.ascontiguousarray(stencil, dtype=np.int64).reshape(-1, 6)
+        present = np.ascontiguousarray(present, dtype=np.bool_).reshape(-1, 3)
+        Q, theta0, W, self.area, self.kmap3 = shell_rest_geometry(rest, stencil, present, stiffness)
+        self.groups = [_Group(stencil, HINGE_SLOTS, present, theta0, Q, W, weight)]
+        if jump is not None and jump[0].shape[0] > 0:
+            js, jB, jw, gamma = jump
+            self.groups.append(_jump_group(np.asarray(js, dtype=np.int64).reshape(-1, 12),
+                                           rest, jB, jw, gamma))
+
+    # the triangle group's arrays, for tests and diagnostics
+    stencil = property(lambda self: self.groups[0].stencil)
+    present = property(lambda self: self.groups[0].present)
+    Q = property(lambda self: self.groups[0].Q)
+    theta0 = property(lambda self: self.groups[0].theta0)
+    W = property(lambda self: self.groups[0].W)
+    H6 = property(lambda self: self.groups[0].H)
+
     def stencils(self):
-        return [self.stencil]
+        return [g.stencil for g in self.groups]
 
     def bind(self, pattern):
-        self.slots = pattern.slots_for(self.stencil)
+        for g in self.groups:
+            g.slots = pattern.slots_for(g.stencil)
 
 
 class ShellDihedralBendingTerm(_ShellTerm):
@@ -397,55 +490,59 @@ class ShellDihedralBendingTerm(_ShellTerm):
     per-triangle curvature energy of the module docstring; Gauss-Newton system
     matrix (positive semi-definite, exact at rest)."""
 
-    def __init__(self, stencil, present, rest, stiffness, weight):
-        super().__init__(stencil, present, rest, stiffness, weight)
-        self.G = np.zeros((self.stencil.shape[0], 3, 6, 3))
-
     def evaluate(self, x, v, force, want_jac):
-        energy, _ = shell_dihedral_forces(x, self.stencil, self.present, self.theta0, self.Q,
-                                          self.weight, force, self.G)
+        energy = 0.0
+        for g in self.groups:
+            e, _ = shell_dihedral_forces(x, g.stencil, g.hs, g.present, g.theta0, g.Q,
+                                         g.weight, force, g.G)
+            energy += e
         return {"elastic_energy": energy}
 
     def stiffness_product(self, w, out):
-        shell_gn_product(self.stencil, self.G, self.Q, w, out)
+        for g in self.groups:
+            shell_gn_product(g.stencil, g.G, g.Q, w, out)
 
     def add_to_system(self, data, alpha, beta):
-        add_shell_gn_blocks(self.G, self.Q, alpha, self.slots, data)
+        for g in self.groups:
+            add_shell_gn_blocks(g.G, g.Q, alpha, g.slots, data)
 
     def energy(self, x):
-        d = self.angles(x) - self.theta0
-        return 0.5 * float(np.sum(np.einsum("ti,tij,tj->t", d, self.Q, d) * self.weight))
+        total = 0.0
+        for g in self.groups:
+            d = g.angles(x) - g.theta0
+            total += 0.5 * float(np.sum(np.einsum("ti,tij,tj->t", d, g.Q, d) * g.weight))
+        return total
 
     def angles(self, x):
         """Signed dihedral angles (nt, 3) of each triangle's hinges (0 where absent)."""
-        out = np.zeros((self.stencil.shape[0], 3))
-        for i in range(3):
-            t = np.nonzero(self.present[:, i])[0]
-            out[t, i] = hinge_angles(x, self.stencil[t][:, HINGE_SLOTS[i]])
-        return out
+        return self.groups[0].angles(x)
 
 
 class ShellIsometricBendingTerm(_ShellTerm):
     """Quadratic isometric bending with the per-triangle curvature energy: constant,
-    exact Jacobian -H, H = sum_T (W^T Q W) (x) I3 (flat rest shape assumed;
+    exact Jacobian -H, H = sum (W^T Q W) (x) I3 (flat rest shape assumed;
     ``rest_energy`` reports how far from flat the rest shape is)."""
 
-    def __init__(self, stencil, present, rest, stiffness, weight):
-        super().__init__(stencil, present, rest, stiffness, weight)
-        self.H6 = np.ascontiguousarray(np.einsum("tia,tij,tjb->tab", self.W, self.Q, self.W))
+    def __init__(self, stencil, present, rest, stiffness, weight, jump=None):
+        super().__init__(stencil, present, rest, stiffness, weight, jump)
         self.rest_energy = self.energy(np.asarray(rest, dtype=np.float64))
 
     def evaluate(self, x, v, force, want_jac):
-        return {"elastic_energy": shell_isometric_forces(x, self.stencil, self.H6,
-                                                         self.weight, force)}
+        return {"elastic_energy": sum(shell_isometric_forces(x, g.stencil, g.H, g.weight, force)
+                                      for g in self.groups)}
 
     def stiffness_product(self, w, out):
-        shell_isometric_product(self.stencil, self.H6, w, out)
+        for g in self.groups:
+            shell_isometric_product(g.stencil, g.H, w, out)
 
     def add_to_system(self, data, alpha, beta):
-        add_shell_isometric_blocks(self.H6, alpha, self.slots, data)
+        for g in self.groups:
+            add_shell_isometric_blocks(g.H, alpha, g.slots, data)
 
     def energy(self, x):
-        xs = np.asarray(x, dtype=np.float64)[self.stencil]          # (nt, 6, 3)
-        e = 0.5 * np.einsum("tac,tab,tbc->t", xs, self.H6, xs)
-        return float(np.sum(e * self.weight))
+        xa = np.asarray(x, dtype=np.float64)
+        total = 0.0
+        for g in self.groups:
+            xs = xa[g.stencil]
+            total += float(np.sum(0.5 * np.einsum("tac,tab,tbc->t", xs, g.H, xs) * g.weight))
+        return total

@@ -226,7 +226,7 @@ def _hinge_bending(cfg, model, layout, kind):
     """Per-hinge sums of bending.py for ``dihedral``/``isometric``; the
     per-triangle curvature of bending_shell.py for ``*_shell``."""
     from .bending import DihedralBendingTerm, IsometricBendingTerm
-    from .bending_shell import ShellDihedralBendingTerm, ShellIsometricBendingTerm
+    from .bending_shell import JUMP_GAMMA, ShellDihedralBendingTerm, ShellIsometricBendingTerm
     shell = kind in ("dihedral_shell", "isometric_shell")
     elements = model.shell_stencil if shell else model.hinge_vertices
     local, weight, ids = local_elements(elements, layout)
@@ -234,11 +234,14 @@ def _hinge_bending(cfg, model, layout, kind):
     piece_of_vertex = np.zeros(model.num_vertices, dtype=np.int64)
     for p, info in enumerate(model.pieces):
         piece_of_vertex[info.vertex_start:info.vertex_stop] = p
-    B = np.array([spec.material.bending for spec in cfg.cloth])[
-        piece_of_vertex[elements[ids, 0]]]
+    piece_B = np.array([spec.material.bending for spec in cfg.cloth])
+    B = piece_B[piece_of_vertex[elements[ids, 0]]]
     rest = model.rest_positions[layout.local_input]
     if shell:
+        jump_local, jump_weight, jump_ids = local_elements(model.shell_jump_stencil, layout)
+        jump_B = piece_B[piece_of_vertex[model.shell_jump_stencil[jump_ids, 0]]]
         term = ShellDihedralBendingTerm if kind == "dihedral_shell" else ShellIsometricBendingTerm
-        return term(local, model.shell_present[ids], rest, B, weight)
+        return term(local, model.shell_present[ids], rest, B, weight,
+                    jump=(jump_local, jump_B, jump_weight, JUMP_GAMMA))
     term = DihedralBendingTerm if kind == "dihedral" else IsometricBendingTerm
     return term(local, rest, B, weight)

@@ -90,21 +90,22 @@ def build_model(cfg: SceneConfig) -> Model:
                                   for spec, piece in zip(cfg.cloth, pieces)])
     rest_length = np.linalg.norm(positions[springs[:, 1]] - positions[springs[:, 0]], axis=1)
 
-    hinge_vertices = shell_stencil = shell_present = None
+    hinge_vertices = shell_stencil = shell_present = shell_jump = None
     kinds = {spec.material.bending_kind for spec in cfg.cloth}
     try:
         if kinds & {"dihedral", "isometric"}:
             from ..physics.bending import hinges
             hinge_vertices = hinges(triangles)
         if kinds & {"dihedral_shell", "isometric_shell"}:
-            from ..physics.bending_shell import shell_stencils
+            from ..physics.bending_shell import shell_jump_stencils, shell_stencils
             shell_stencil, shell_present = shell_stencils(triangles)
+            shell_jump = shell_jump_stencils(shell_stencil, shell_present)
     except ValueError as exc:
         raise ConfigError("cloth", "mesh", "hinge bending needs consistently oriented "
                           f"triangles: {exc}") from None
     return Model(rest_positions=positions, triangles=triangles.astype(np.int64),
                  hinge_vertices=hinge_vertices, shell_stencil=shell_stencil,
-                 shell_present=shell_present,
+                 shell_present=shell_present, shell_jump_stencil=shell_jump,
                  vertex_mass=vertex_mass, vertex_area=vertex_area,
                  spring_vertices=springs.astype(np.int64), spring_rest_length=rest_length,
                  spring_stiffness=stiffness, spring_damping=damping,
