@@ -398,10 +398,11 @@ class Simulation:
         phis, normals, vels, offsets = self._query_colliders(x_new, self.time + h)
         pen = float(np.max((offsets - phis)[:, free], initial=-np.inf))
         moved = np.zeros(n, dtype=bool)
-        for j in range(len(self.colliders)):
-            phi, nrm, vb = self.colliders[j].query(x_new, self.time + h)
-            xs, vs, inside = project(x_new[free], v_new[free], phi[free], nrm[free], vb[free],
-                                     offsets[j][free])
+        for j, col in enumerate(self.colliders):
+            if moved.any():     # an earlier collider's projection moved vertices: query again
+                phis[j], normals[j], vels[j] = col.query(x_new, self.time + h)
+            xs, vs, inside = project(x_new[free], v_new[free], phis[j][free], normals[j][free],
+                                     vels[j][free], offsets[j][free])
             x_new[free], v_new[free] = xs, vs
             moved[np.nonzero(free)[0][inside]] = True
         self._collision_diag = (int(idx.size), pen, int(moved.sum()))
