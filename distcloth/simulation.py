@@ -26,6 +26,7 @@ from .linalg.constraints import Constraints, filter_system
 from .linalg.system import SolverFailure
 from .linalg.pattern import BlockPattern
 from .physics.terms import FORCE_STAGES, build_terms
+from .collision_stages import MAX_CONTACT_PASSES
 from .pipeline import Pipeline
 
 STAGES = ("kinematics", "collision:bodies", "constraints") + FORCE_STAGES + ("assembly", "solve", "update",
@@ -34,9 +35,8 @@ STAGES = ("kinematics", "collision:bodies", "constraints") + FORCE_STAGES + ("as
 DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_energy",
                "total_energy", "max_strain", "max_speed", "newton_iterations",
                "newton_residual", "ksp_iterations", "ksp_residual", "rejected_steps",
-               "contacts", "max_penetration", "projected_vertices")
-MAX_CONTACT_PASSES = 3   # solves per attempt at most when contacts were missed (collisions)
-MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
+               "contacts", "max_penetration", "projected_vertices", "impulse_hits",
+               "impact_zone_vertices", "self_intersections")
 MAX_SPEED = 1.0e3   # m/s: beyond this a cloth simulation has blown up
 
 
@@ -88,7 +88,9 @@ class Simulation:
             a = model.slide_axes[mine]
             self.slide_local = sl[mine]
             self.slide_S = np.eye(3)[None] - np.einsum("ni,nj->nij", a, a)
-        self._setup_colliders(cfg, model, local)
+        from .collision_stages import CollisionStages
+        self._first_forces = None
+        self.collisions = CollisionStages(self, cfg, model, local)
         self.terms = build_terms(cfg, model, lay)
         self.pattern = BlockPattern(self.n_owned, self.n_local,
                                     [s for t in self.terms for s in t.stencils()])
@@ -122,7 +124,7 @@ class Simulation:
     def _build_pipeline(self) -> Pipeline:
         p = Pipeline()
         p.add("kinematics", self._kinematics)
-        if self.colliders:     # only scenes with the collisions effect have the stages
+        if self.collisions.has_bodies:   # only scenes that name colliders have the stages
             p.add("collision:bodies", self._collision_bodies)
         p.add("constraints", self._constraints)
         by_name = {t.name: t for t in self.terms}
@@ -134,40 +136,9 @@ class Simulation:
         p.add("update", self._update)
         p.add("diagnostics", self._diagnostics)
         p.add("output", self._output)
-        if self.colliders:
+        if self.collisions.has_response:
             p.add("collision:response", self._collision_response)
         return p
-
-    def _setup_colliders(self, cfg, model, local) -> None:
-        """Analytic colliders of a scene with the collisions effect (none otherwise)."""
-        from .collision.colliders import (AnalyticCollider, Box, Capsule, Plane, RigidMotion,
-                                          Sphere)
-        self.colliders = []
-        self.contacts = None
-        self._released = np.zeros(self.n_local, dtype=bool)
-        self._pending_released = None
-        self._first_forces = None
-        self._collision_diag = (0, 0.0, 0)
-        if not cfg.has("collisions"):
-            return
-        shapes = {"plane": Plane, "sphere": Sphere, "capsule": Capsule, "box": Box}
-        for spec in cfg.colliders:
-            motion = None
-            if spec.motion is not None:
-                motion = RigidMotion(spec.motion.times, spec.motion.translations,
-                                     spec.motion.rotations)
-            self.colliders.append(AnalyticCollider(shapes[spec.shape](**dict(spec.geometry)),
-                                                   motion, spec.friction, spec.thickness))
-        thick = np.zeros(model.num_vertices)
-        for piece, spec in zip(model.pieces, cfg.cloth):
-            thick[piece.vertex_start:piece.vertex_stop] = spec.thickness
-        self.cloth_thickness = thick[local]
-        # pins and sliding pins keep their constraint: never a contact
-        self._never_contact = np.zeros(self.n_local, dtype=bool)
-        self._never_contact[self.pinned_local] = True
-        self._never_contact[self.slide_local] = True
-        g = float(np.linalg.norm(cfg.gravity)) if cfg.has("gravity") else 0.0
-        self._gravity_norm = g
 
     def prepare(self) -> None:
         """Collective checks before the first step: solver options, explicit stability."""
@@ -313,112 +284,22 @@ class Simulation:
         if target_velocity is None:
             target_velocity = np.zeros((idx.size, 3))
         z = np.einsum("nij,nj->ni", np.eye(3)[None] - S, target_velocity - self.v[idx])
-        if self.contacts is not None and self.contacts.index.size:
+        contacts = self.collisions.contacts
+        if contacts is not None and contacts.index.size:
             # contacts (never on pinned or sliding vertices): S = I - n n^T
             from .collision.response import contact_constraint
-            cS, cz = contact_constraint(self.contacts, self.v)
-            idx = np.concatenate([idx, self.contacts.index])
+            cS, cz = contact_constraint(contacts, self.v)
+            idx = np.concatenate([idx, contacts.index])
             S = np.concatenate([S, cS])
             z = np.concatenate([z, cz])
         order = np.argsort(idx, kind="stable")
         return Constraints(idx[order], S[order], z[order])
 
-    def _query_colliders(self, x, t):
-        """(phi (k, n), normal (k, n, 3), velocity (k, n, 3), d (k, n)) at positions x."""
-        k, n = len(self.colliders), x.shape[0]
-        phis, normals, vels = np.empty((k, n)), np.empty((k, n, 3)), np.empty((k, n, 3))
-        offsets = np.empty((k, n))
-        for j, c in enumerate(self.colliders):
-            phis[j], normals[j], vels[j] = c.query(x, t)
-            offsets[j] = self.cloth_thickness[:n] + c.thickness
-        return phis, normals, vels, offsets
-
     def _collision_bodies(self, t, h, missed=None):
-        """The contact set of the attempt, on every local vertex (owned and
-        ghosts: each rank computes the same contact for a shared vertex).
-        ``missed`` (k, n_local) bool: contacts a previous pass of the attempt
-        missed (they join whatever their prediction says)."""
-        from .collision.response import detect
-        phis, normals, vels, offsets = self._query_colliders(self.x, t)
-        margin = offsets + h * h * self._gravity_norm
-        penetrating = np.any(phis < offsets, axis=0)
-        exclude = self._never_contact | (self._released & ~penetrating)
-        if missed is not None:
-            exclude = exclude & ~missed.any(axis=0)
-            margin = np.where(missed, np.inf, margin)
-        frictions = np.array([c.friction for c in self.colliders])
-        return detect(phis, normals, vels, self.v, offsets, frictions, h, margin, exclude)
-
-    def _missed_contacts(self, result, h, missed):
-        """(k, n_local) bool of free vertices that end the step deeper than
-        MISSED_FRACTION d inside a collider without a contact constraint
-        (accumulated over the passes), or None if there is none on any rank.
-        Collective: one reduction and, if needed, one ghost exchange."""
-        n, k = self.n_owned, len(self.colliders)
-        phis, _, _, offsets = self._query_colliders(result.x, self.time + h)
-        free = ~self._never_contact[:n]
-        free[self.contacts.index[self.contacts.index < n]] = False
-        deep = (offsets - phis > MISSED_FRACTION * offsets) & free[None]
-        if self.comm.max(np.array([float(deep.any())]))[0] == 0.0:
-            return None
-        flags = np.zeros((self.n_local, k))
-        flags[:n] = deep.T
-        self.ghosts.update(flags)
-        new = flags.T > 0.5
-        return new if missed is None else (new | missed)
+        return self.collisions.bodies(t, h, missed)
 
     def _collision_response(self, result, h):
-        """After the solve: Coulomb friction on the contacts, adhesive contacts
-        marked for release, then the position fail-safe (collective: one ghost
-        exchange of the release flags)."""
-        from .collision.response import friction, normal_impulse, project
-        n = self.n_owned
-        x_new, v_new = result.x.copy(), result.v.copy()
-        c = self.contacts
-        released = np.zeros((self.n_local, 1))
-        mine = c.index < n
-        idx = c.index[mine]
-        if idx.size:
-            f0 = self._first_forces if self._first_forces is not None else np.zeros((self.n_local, 3))
-            normal = c.normal[mine]
-            v_free = self.v[idx] + h * f0[idx] / self.mass[idx, None]
-            dvn = normal_impulse(v_new[idx], v_free, normal)
-            released[idx[dvn < 0.0], 0] = 1.0
-            mu = c.friction[mine]
-            if np.any(mu > 0):
-                vf = friction(v_new[idx], c.velocity[mine], normal, mu, dvn)
-                gain = getattr(self.integrator, "position_gain", None) or h
-                x_new[idx] += gain * (vf - v_new[idx])
-                v_new[idx] = vf
-        self.ghosts.update(released)
-        self._pending_released = released[:, 0] > 0.5
-        # fail-safe against every collider at the end of the step; the
-        # penetration diagnostic is what the solve (and friction) left
-        free = ~self._never_contact[:n]
-        phis, normals, vels, offsets = self._query_colliders(x_new, self.time + h)
-        pen = float(np.max((offsets - phis)[:, free], initial=-np.inf))
-        moved = np.zeros(n, dtype=bool)
-        for j, col in enumerate(self.colliders):
-            if moved.any():     # an earlier collider's projection moved vertices: query again
-                phis[j], normals[j], vels[j] = col.query(x_new, self.time + h)
-            xs, vs, inside = project(x_new[free], v_new[free], phis[j][free], normals[j][free],
-                                     vels[j][free], offsets[j][free])
-            x_new[free], v_new[free] = xs, vs
-            moved[np.nonzero(free)[0][inside]] = True
-        self._collision_diag = (int(idx.size), pen, int(moved.sum()))
-        result.x, result.v = x_new, v_new
-        return result
-
-    def _collision_diagnostics(self) -> dict:
-        """contacts (global count of contact constraints on owned vertices),
-        max_penetration (m, max of d - phi, positive inside, before the
-        fail-safe) and projected_vertices (moved by the fail-safe); collective."""
-        if not self.colliders:
-            return {}
-        count, pen, moved = self._collision_diag
-        sums = self.comm.sum(np.array([float(count), float(moved)]))
-        pen = self.comm.max(np.array([pen]))[0]
-        return {"contacts": sums[0], "max_penetration": pen, "projected_vertices": sums[1]}
+        return self.collisions.response(result, h)
 
     def _update(self, result):
         n = self.n_owned
@@ -449,7 +330,7 @@ class Simulation:
             "newton_iterations": result.newton_iterations, "newton_residual": result.newton_residual,
             "ksp_iterations": result.ksp_iterations, "ksp_residual": result.ksp_residual,
             "rejected_steps": self.rejections,
-            **self._collision_diagnostics(),
+            **self.collisions.diagnostics(),
         }
 
     def _output(self, writer):
@@ -495,9 +376,10 @@ class Simulation:
         else (None, reason, fatal) with the state unchanged."""
         target = self.pipeline.run("kinematics", self.time + h)
         missed = None
-        for _ in range(MAX_CONTACT_PASSES if self.colliders else 1):
-            if self.colliders:
-                self.contacts = self.pipeline.run("collision:bodies", self.time, h, missed)
+        col = self.collisions
+        for _ in range(MAX_CONTACT_PASSES if col.has_bodies else 1):
+            if col.has_bodies:
+                col.contacts = self.pipeline.run("collision:bodies", self.time, h, missed)
             cons = self.pipeline.run("constraints", target)
             error, solver_failure, result = None, False, None
             self._first_forces = None
@@ -511,15 +393,22 @@ class Simulation:
             if agreed is not None:
                 where = f" (rank {agreed[0]})" if self.comm.size > 1 and not solver_failure else ""
                 return None, agreed[1] + where, not solver_failure
-            if not self.colliders:
+            if not col.has_bodies:
                 break
             # a vertex the prediction missed that ends the step inside a body:
             # solve the step again with it as a contact (collective)
-            missed = self._missed_contacts(result, h, missed)
+            missed = col.missed_contacts(result, h, missed)
             if missed is None:
                 break
-        if self.colliders:      # collective (every rank got here): friction, fail-safe
-            result = self.pipeline.run("collision:response", result, h)
+        if col.has_response:    # collective (every rank got here): friction, impulses, fail-safe
+            error = None
+            try:
+                result = self.pipeline.run("collision:response", result, h)
+            except Exception as exc:
+                error = f"{type(exc).__name__} in the collision response: {exc}"
+            agreed = self.comm.agree(error)
+            if agreed is not None:
+                return None, agreed[1] + (f" (rank {agreed[0]})" if self.comm.size > 1 else ""), True
         saved = (self.x.copy(), self.v.copy())
         self.pipeline.run("update", result)
         reason = self._check_state()
@@ -529,8 +418,7 @@ class Simulation:
             self.x, self.v = saved
             return None, reason, False
         self.integrator.accepted()
-        if self._pending_released is not None:
-            self._released = self._pending_released
+        self.collisions.accepted()
         self.time += h
         return result, None, False
 

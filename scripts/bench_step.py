@@ -60,12 +60,16 @@ def worker(args):
     opts, mat_type = {**SOLVERS, **EXTRA_SOLVERS}[args.solver]
     solver = dict(opts, ksp_rtol=1e-5, ksp_norm_type="unpreconditioned", mat_type=mat_type,
                   warm_start=args.warm, ksp_max_it=5000)
+    material = {"density": 0.1, "stretch": 10.0, "shear": 1.0, "bending": 1e-6}
+    if args.bending is not None:     # the FE membrane with the chosen bending model
+        material = {"model": "fem", "density": 0.1, "stretch": 10.0, "bending": 1e-6,
+                    "bending_model": args.bending}
     raw = {
         "scene": "bench",
         "cloth": [{"name": "square", "mesh": {"grid": {"size": [0.5, 0.5], "resolution": [side, side]},
                                                "center": [0, 0, 1]},
                    "pins": [{"edge": "top"}],
-                   "material": {"density": 0.1, "stretch": 10.0, "shear": 1.0, "bending": 1e-6}}],
+                   "material": material}],
         "effects": ["gravity", "membrane", "bending"],
         "time": {"end": 10.0, "step": 0.02},
         "solver": solver,
@@ -112,9 +116,11 @@ def worker(args):
     sim.destroy()
 
 
-def launch(ranks, size, solver, warm, steps, warmup):
+def launch(ranks, size, solver, warm, steps, warmup, bending=None):
     cmd = [str(ROOT / "scripts" / "mpiexec.sh"), str(ranks), sys.executable, __file__, "--worker",
            "--size", str(size), "--solver", solver, "--steps", str(steps), "--warmup", str(warmup)]
+    if bending is not None:
+        cmd += ["--bending", bending]
     if warm:
         cmd.append("--warm")
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
@@ -140,9 +146,17 @@ def main():
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--warmup", type=int, default=2)
     ap.add_argument("--json", help="also write all results to this JSON file")
+    ap.add_argument("--bending", choices=["dihedral", "isometric", "dihedral_shell", "isometric_shell"],
+                    help="worker: FE membrane with this bending model (default: mass-spring)")
+    ap.add_argument("--bending-models", nargs="+",
+                    choices=["dihedral", "isometric", "dihedral_shell", "isometric_shell"],
+                    help="compare the FE bending models instead of the solvers: one row per "
+                         "model and rank count with the first of --solvers, no warm start")
     args = ap.parse_args()
     if args.worker:
         return worker(args)
+    if args.bending_models:
+        return compare_bending(args)
     rows = []
     print("| vertices | ranks | solver | warm start | step s | forces s | assembly s | solve s | "
           "rest s | KSP its | true rel. residual |")
@@ -176,6 +190,29 @@ def main():
                       f"efficiency {100 * eff:.0f} %, iterations x{growth:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+def compare_bending(args):
+    """Cost per step of the FE bending models (the shell models' curvature-jump
+    penalty widens the matrix stencil to the neighbours' neighbours)."""
+    solver = args.solvers[0]
+    print(f"FE membrane, solver {solver}, {args.steps} timed steps after {args.warmup} warm-up\n")
+    print("| vertices | ranks | bending | step s | forces s | assembly s | solve s | KSP its | "
+          "step / dihedral step |")
+    print("|---:|---:|---|---:|---:|---:|---:|---:|---:|")
+    for size in args.sizes:
+        for ranks in args.ranks:
+            base = None
+            for bending in args.bending_models:
+                r = launch(ranks, size, solver, False, args.steps, args.warmup, bending)
+                if r is None:
+                    print(f"| {size} | {ranks} | {bending} | failed |")
+                    continue
+                base = r["step_time"] if bending == "dihedral" else base
+                ratio = f"{r['step_time'] / base:.2f}" if base else ""
+                print(f"| {r['size']} | {ranks} | {bending} | {r['step_time']:.3f} | "
+                      f"{r['forces']:.3f} | {r['assembly']:.3f} | {r['solve']:.3f} | "
+                      f"{r['ksp_iterations']:.0f} | {ratio} |", flush=True)
 
 
 if __name__ == "__main__":

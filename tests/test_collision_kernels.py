@@ -4,6 +4,7 @@ runs them identically."""
 from __future__ import annotations
 
 import numpy as np
+from meshes import grid_mesh
 import pytest
 from scipy.optimize import minimize
 
@@ -15,18 +16,6 @@ from distcloth.collision import tritri as TT
 
 
 # ---------------------------------------------------------------- helpers
-
-def grid_mesh(nx, ny, h=1.0):
-    """Split-square grid: vertices (nx+1)(ny+1), triangles 2 nx ny."""
-    i, j = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), indexing="ij")
-    x = np.stack([i.ravel() * h, j.ravel() * h, np.zeros(i.size)], axis=1)
-    v = lambda a, b: a * (ny + 1) + b
-    a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-    a, b = a.ravel(), b.ravel()
-    tri = np.concatenate([np.stack([v(a, b), v(a + 1, b), v(a + 1, b + 1)], 1),
-                          np.stack([v(a, b), v(a + 1, b + 1), v(a, b + 1)], 1)])
-    return x, tri.astype(np.int64)
-
 
 def crumpled_grid(rng, nx=16, ny=16):
     x, tri = grid_mesh(nx, ny, h=1.0 / nx)

@@ -152,7 +152,7 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
     assert again == config
 
 
-THE_EFFECTS = "one of gravity | membrane | bending | damping | drag | collisions"
+THE_EFFECTS = "one of gravity | membrane | bending | damping | drag | collisions | self_collision"
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
              "newmark_gamma, adaptive, max_halvings, max_strain")
 
@@ -182,7 +182,7 @@ ERRORS = [
     ("effects", ["gravity", "wind"], f"effects.1: 'wind' — {THE_EFFECTS}"),
     ("effects", ["drag", "drag"], "effects.1: 'drag' — each effect at most once"),
     ("effects", "gravity", "effects: 'gravity' — a list of effect names: gravity, membrane, "
-                           "bending, damping, drag, collisions"),
+                           "bending, damping, drag, collisions, self_collision"),
     ("time", {"stepp": 0.01},
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from meshes import icosphere
 import pytest
 
 from distcloth.collision.imagespace import (coulomb_velocity_response, lookup, reaction_force,
@@ -18,34 +19,6 @@ CENTER = np.array([0.1, -0.05, 0.2])
 RADIUS = 0.3
 V0 = np.array([0.2, -0.4, 0.1])          # rigid body velocity field V0 + W x (y - CENTER)
 W = np.array([1.0, 0.5, -2.0])
-
-
-def icosphere(level: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit icosphere, outward oriented, by midpoint subdivision."""
-    g = (1 + 5 ** 0.5) / 2
-    v = np.array([[-1, g, 0], [1, g, 0], [-1, -g, 0], [1, -g, 0], [0, -1, g], [0, 1, g],
-                  [0, -1, -g], [0, 1, -g], [g, 0, -1], [g, 0, 1], [-g, 0, -1], [-g, 0, 1]], float)
-    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
-                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
-                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
-                  [8, 6, 7], [9, 8, 1]])
-    verts = list(v / np.linalg.norm(v, axis=1)[:, None])
-    for _ in range(level):
-        cache: dict[tuple[int, int], int] = {}
-
-        def mid(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in cache:
-                m = verts[a] + verts[b]
-                verts.append(m / np.linalg.norm(m))
-                cache[key] = len(verts) - 1
-            return cache[key]
-
-        f = np.array([[a, mid(a, b), mid(c, a)] for a, b, c in f]
-                     + [[b, mid(b, c), mid(a, b)] for a, b, c in f]
-                     + [[c, mid(c, a), mid(b, c)] for a, b, c in f]
-                     + [[mid(a, b), mid(b, c), mid(c, a)] for a, b, c in f])
-    return np.array(verts), f
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,7 @@ from .checks import (exactly_one_of, format_value, join, read_bool, read_choice,
                      read_int, read_list, read_mapping, read_section, read_str, read_vector)
 from .schema import (DEFAULT_SOLVER, DRAPE_METHODS, DRAPE_STOP_ON, EFFECTS, GRID_CORNERS,
                      GRID_EDGES, GRID_PATTERNS, INTEGRATORS, MAT_TYPES, MATERIAL_MODELS,
-                     COLLIDER_SHAPES, SHAPE_KEYS, ClothSpec, ColliderSpec, ConfigError,
+                     COLLIDER_SHAPES, COLLIDER_METHODS, IMAGE_AXES, SHAPE_KEYS, ClothSpec, ColliderSpec, ConfigError,
                      MotionSpec, DrapeSpec, GridSpec, MaterialSpec, MeshSpec,
                      OutputSpec, PinSpec, SceneConfig, TimeSpec, BENDING_MODELS,
                      STRAIN_MODELS)
@@ -55,7 +55,9 @@ CLOTH_KEYS = {"name": LEAF, "mesh": MESH_KEYS, "pins": [PIN_KEYS], "material": M
               "thickness": LEAF}
 MOTION_KEYS = _leaves("times", "translations", "rotations")
 COLLIDER_KEYS = {**_leaves("name", "shape", "normal", "offset", "center", "radius", "a", "b",
-                           "half_extents", "friction", "thickness"), "motion": MOTION_KEYS}
+                           "half_extents", "friction", "thickness", "file", "frame_rate",
+                           "scale", "method", "resolution", "axis"), "motion": MOTION_KEYS}
+MESH_COLLIDER_KEYS = ("file", "frame_rate", "scale", "method", "resolution", "axis")
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
 OUTPUT_KEYS = _leaves("file", "every", "preview")
@@ -126,7 +128,7 @@ def config_from_dict(raw: dict, base_dir: str, source_name: str) -> SceneConfig:
     solver, mat_type, warm_start, rebuild = _read_solver(top.get("solver"), "solver")
     output = _read_output(top.get("output"), "output", time)
     drape = _read_drape(top.get("drape"), "drape")
-    colliders = _read_colliders(top.get("colliders"), "colliders")
+    colliders = _read_colliders(top.get("colliders"), "colliders", base_dir)
     if "collisions" in effects and not colliders:
         raise ConfigError("effects", list(effects),
                           "the collisions effect needs at least one entry under colliders:")
@@ -600,15 +602,15 @@ def _read_output_file(value: Any, key: str) -> str:
     return os.path.normpath(path)
 
 
-def _read_colliders(value: Any, key: str) -> tuple[ColliderSpec, ...]:
-    """Analytic colliders; checked whether or not the collisions effect is on."""
+def _read_colliders(value: Any, key: str, base_dir: str) -> tuple[ColliderSpec, ...]:
+    """Analytic and mesh colliders; checked whether or not the collisions effect is on."""
     if value is None:
         return ()
     read_list(value, key, "colliders, each a mapping with name and shape")
     out: list[ColliderSpec] = []
     first: dict[str, int] = {}
     for i, entry in enumerate(value):
-        spec = _read_collider(entry, join(key, i), i)
+        spec = _read_collider(entry, join(key, i), i, base_dir)
         if spec.name in first:
             raise ConfigError(join(join(key, i), "name"), spec.name,
                               f"a name no other collider has (colliders.{first[spec.name]} has it)")
@@ -617,16 +619,25 @@ def _read_colliders(value: Any, key: str) -> tuple[ColliderSpec, ...]:
     return tuple(out)
 
 
-def _read_collider(value: Any, key: str, index: int) -> ColliderSpec:
+def _read_collider(value: Any, key: str, index: int, base_dir: str) -> ColliderSpec:
     section = read_mapping(value, key, COLLIDER_KEYS)
     name = _optional(section, key, "name", f"collider{index}", read_str)
     shape = _required(section, key, "shape", "one of " + " | ".join(COLLIDER_SHAPES),
                       read_choice, COLLIDER_SHAPES)
     wanted = SHAPE_KEYS[shape]
-    for other in ("normal", "offset", "center", "radius", "a", "b", "half_extents"):
-        if other not in wanted and section.get(other) is not None:
+    takes = wanted + (MESH_COLLIDER_KEYS[1:] if shape == "mesh" else ())
+    for other in ("normal", "offset", "center", "radius", "a", "b", "half_extents") + MESH_COLLIDER_KEYS:
+        if other not in takes and section.get(other) is not None:
             raise ConfigError(join(key, other), section[other],
-                              f"not a key of a {shape}; a {shape} takes " + ", ".join(wanted))
+                              f"not a key of a {shape}; a {shape} takes " + ", ".join(takes))
+    common = dict(
+        friction=_optional(section, key, "friction", ColliderSpec.friction, read_float, at_least=0),
+        thickness=_optional(section, key, "thickness", ColliderSpec.thickness, read_float,
+                            at_least=0),
+        motion=_optional(section, key, "motion", None, _read_motion))
+    if shape == "mesh":
+        return ColliderSpec(name=name, shape=shape, geometry=(), **common,
+                            **_read_mesh_collider(section, key, base_dir))
     geometry: list[tuple[str, Any]] = []
     for name_ in wanted:
         what = {"normal": "[x, y, z], non-zero", "offset": "a number in m (normal . y = offset)",
@@ -644,12 +655,44 @@ def _read_collider(value: Any, key: str, index: int) -> ColliderSpec:
         if name_ == "normal" and float(np.linalg.norm(v)) == 0.0:
             raise ConfigError(join(key, "normal"), list(v), "a non-zero direction")
         geometry.append((name_, v))
-    return ColliderSpec(
-        name=name, shape=shape, geometry=tuple(geometry),
-        friction=_optional(section, key, "friction", ColliderSpec.friction, read_float, at_least=0),
-        thickness=_optional(section, key, "thickness", ColliderSpec.thickness, read_float,
-                            at_least=0),
-        motion=_optional(section, key, "motion", None, _read_motion))
+    return ColliderSpec(name=name, shape=shape, geometry=tuple(geometry), **common)
+
+
+def _read_mesh_collider(section: dict, key: str, base_dir: str) -> dict:
+    """file: one OBJ/PLY (static, or moved by motion) or a list of them (a
+    deforming sequence, one file per frame at frame_rate frames per second)."""
+    raw = section.get("file")
+    if raw is None:
+        raise ConfigError(join(key, "file"), None, "an OBJ or PLY file, or a list of them "
+                          "(one per frame)")
+    many = isinstance(raw, list)
+    if many and not raw:
+        raise ConfigError(join(key, "file"), raw, "a non-empty list of OBJ or PLY files")
+    files = tuple(_read_mesh_file(f, join(join(key, "file"), i), base_dir)
+                  for i, f in enumerate(raw)) if many else (
+        _read_mesh_file(raw, join(key, "file"), base_dir),)
+    rate = _optional(section, key, "frame_rate", None, read_float, above=0)
+    if len(files) > 1 and rate is None:
+        raise ConfigError(join(key, "frame_rate"), None,
+                          "frames per second (> 0): needed with a list of files")
+    if len(files) == 1 and rate is not None:
+        raise ConfigError(join(key, "frame_rate"), rate, "only with a list of files (a sequence)")
+    method = _optional(section, key, "method", ColliderSpec.method, read_choice, COLLIDER_METHODS)
+    if method != "image":
+        for k in ("resolution", "axis"):
+            if section.get(k) is not None:
+                raise ConfigError(join(key, k), section[k], "only with method: image")
+    return dict(
+        files=files, frame_rate=rate,
+        scale=_optional(section, key, "scale", ColliderSpec.scale, read_float, above=0),
+        method=method,
+        resolution=_optional(section, key, "resolution", ColliderSpec.resolution, read_vector, 2,
+                             _read_map_size, "integers from 8 to 8192"),
+        axis=_optional(section, key, "axis", ColliderSpec.axis, read_choice, IMAGE_AXES))
+
+
+def _read_map_size(value: Any, key: str) -> int:
+    return read_int(value, key, at_least=8, at_most=8192)
 
 
 def _read_motion(value: Any, key: str) -> MotionSpec:
@@ -681,6 +724,13 @@ def _collider_to_dict(c: ColliderSpec) -> dict:
     out = {"name": c.name, "shape": c.shape,
            **{k: (list(v) if isinstance(v, tuple) else v) for k, v in c.geometry},
            "friction": c.friction, "thickness": c.thickness}
+    if c.shape == "mesh":
+        out["file"] = c.files[0] if len(c.files) == 1 else list(c.files)
+        if c.frame_rate is not None:
+            out["frame_rate"] = c.frame_rate
+        out.update(scale=c.scale, method=c.method)
+        if c.method == "image":
+            out.update(resolution=list(c.resolution), axis=c.axis)
     if c.motion is not None:
         out["motion"] = {"times": list(c.motion.times),
                          "translations": [list(v) for v in c.motion.translations],

@@ -9,11 +9,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions")
-COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box")
+EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions", "self_collision")
+COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box", "mesh")
+COLLIDER_METHODS = ("bvh", "image")   # mesh colliders: BVH closest points or image-space maps
+IMAGE_AXES = ("x", "y", "z")
 # the geometry keys of each collider shape (all required)
 SHAPE_KEYS = {"plane": ("normal", "offset"), "sphere": ("center", "radius"),
-              "capsule": ("a", "b", "radius"), "box": ("center", "half_extents")}
+              "capsule": ("a", "b", "radius"), "box": ("center", "half_extents"),
+              "mesh": ("file",)}
 INTEGRATORS = ("backward_euler", "bdf2", "implicit_midpoint", "newmark",
                "symplectic_euler", "explicit_midpoint", "rk4")
 GRID_PATTERNS = ("regular", "alternating")
@@ -110,6 +113,9 @@ class MaterialSpec:
     def bending_kind(self) -> str:
         if self.bending_model is not None:
             return self.bending_model
+        # dihedral, not dihedral_shell: the shell model is the accurate one (within
+        # 1 % of the elastica on every mesh family, per-hinge sums +6..17 %) but a
+        # step costs 8x at 100k vertices (docs/benchmarks.md); the user chooses
         return "flexion" if self.model == "mass_spring" else "dihedral"
 
     @property
@@ -143,6 +149,13 @@ class ColliderSpec:
     friction: float = 0.0
     thickness: float = 0.0
     motion: MotionSpec | None = None
+    # mesh colliders only: a deforming sequence is one file per frame at frame_rate
+    files: tuple[str, ...] = ()
+    frame_rate: float | None = None
+    scale: float = 1.0
+    method: str = "bvh"
+    resolution: tuple[int, int] = (256, 256)   # image-space map size (pixels)
+    axis: str = "z"                            # image-space projection axis
 
 
 @dataclass(frozen=True)

@@ -304,8 +304,12 @@ def shell_gn_product(st, G, Q, w, out):
 
 
 @njit(cache=True)
-def add_shell_gn_blocks(G, Q, alpha, slots, data):
-    """data[slot(a,b)] += alpha sum_ij Q_ij G_i[a] G_j[b]^T (slots (ne, s*s), -1 skipped)."""
+def add_shell_gn_blocks(G, Q, hs, alpha, slots, data):
+    """data[slot(a,b)] += alpha sum_ij Q_ij G_i[a] G_j[b]^T (slots (ne, s*s), -1 skipped).
+
+    grad theta_i is non-zero only on its hinge's four stencil entries hs[i],
+    so block (a, b) sums G_i[a] P_i[b]^T over the hinges i holding a (P = Q G):
+    a third of the dense sum's work on the 12-entry curvature-jump stencil."""
     nh = G.shape[1]
     ns = G.shape[2]
     P = np.zeros((nh, ns, 3))
@@ -313,21 +317,26 @@ def add_shell_gn_blocks(G, Q, alpha, slots, data):
         for i in range(nh):
             for a in range(ns):
                 for c in range(3):
-                    acc = 0.0
-                    for j in range(nh):
-                        acc += Q[t, i, j] * G[t, j, a, c]
-                    P[i, a, c] = acc
-        for a in range(ns):
-            for b in range(ns):
-                slot = slots[t, ns * a + b]
-                if slot < 0:
+                    P[i, a, c] = 0.0
+            for j in range(nh):
+                q = alpha * Q[t, i, j]
+                if q == 0.0:
                     continue
-                for p in range(3):
-                    for q in range(3):
-                        acc = 0.0
-                        for i in range(nh):
-                            acc += G[t, i, a, p] * P[i, b, q]
-                        data[slot, p, q] += alpha * acc
+                for k in range(4):
+                    a = hs[j, k]
+                    for c in range(3):
+                        P[i, a, c] += q * G[t, j, a, c]
+        for i in range(nh):
+            for k in range(4):
+                a = hs[i, k]
+                for b in range(ns):
+                    slot = slots[t, ns * a + b]
+                    if slot < 0:
+                        continue
+                    for p in range(3):
+                        g = G[t, i, a, p]
+                        for q in range(3):
+                            data[slot, p, q] += g * P[i, b, q]
 
 
 @njit(cache=True)
@@ -504,7 +513,7 @@ class ShellDihedralBendingTerm(_ShellTerm):
 
     def add_to_system(self, data, alpha, beta):
         for g in self.groups:
-            add_shell_gn_blocks(g.G, g.Q, alpha, g.slots, data)
+            add_shell_gn_blocks(g.G, g.Q, g.hs, alpha, g.slots, data)
 
     def energy(self, x):
         total = 0.0

@@ -1,0 +1,300 @@
+"""The collision stages of a step: what a scene's colliders and the
+self_collision effect add to the pipeline (nothing, if it names neither).
+
+Three sources of contact, each a stage only when the scene asks for it:
+
+* **Colliders as distance fields** (analytic shapes; mesh colliders through
+  BVH closest points, distcloth/collision/mesh_query.py; or through
+  image-space maps, distcloth/collision/image_collider.py, seed 002 §4).
+  Stage ``collision:bodies`` before the solve: a vertex predicted to come
+  within d = cloth + collider thickness becomes a Baraff-Witkin constraint
+  S = I - n n^T with the normal velocity that stops it at d (seed 000 Part 1
+  §2.3 names both constraint and impulse responses; we chose constraints for
+  resting contact because the implicit solve then sees the contact: no
+  bouncing on a sphere or a plane at 5 ms steps, which impulses after an
+  unconstrained solve gave).  A vertex the prediction missed triggers a
+  re-solve with it as a contact.
+* **After the solve** (stage ``collision:response``): Coulomb friction on the
+  constrained vertices (Bridson et al. 2002: tangential change at most μ
+  times the normal one) or, for image-space colliders, seed 002's Eq. 15
+  velocity response; then the Bridson pipeline for *triangle* contact (mesh
+  colliders with method bvh and, with self_collision, cloth against cloth):
+  proximity repulsion, CCD impulses and rigid impact zones on one vertex
+  space where collider vertices have infinite mass
+  (distcloth/collision/impulses.py), on candidates the ranks find over the
+  replicated BVH (distcloth/parallel/collide.py); last, a position
+  fail-safe against the distance fields.
+
+Every rank computes the same contact for a shared vertex (ghosts included),
+the Bridson pipeline runs on the all-gathered cloth from the canonical,
+sorted candidate set, so results depend neither on the order contacts were
+found in nor on which rank found them.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+MAX_CONTACT_PASSES = 3   # solves per attempt at most when contacts were missed
+MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
+
+
+class CollisionStages:
+    def __init__(self, sim, cfg, model, local):
+        self.sim = sim
+        self.colliders = []       # distance-field colliders: (query(x, t, maxd), friction, d_c, kind)
+        self.mesh_colliders = []  # MeshCollider objects in the Bridson pipeline (method bvh)
+        self.contacts = None
+        self.released = np.zeros(sim.n_local, dtype=bool)
+        self.pending_released = None
+        self.diag = {}
+        self.detector = None
+        self.self_collision = cfg.has("self_collision")
+        n_local = sim.n_local
+        thick = np.zeros(model.num_vertices)
+        for piece, spec in zip(model.pieces, cfg.cloth):
+            thick[piece.vertex_start:piece.vertex_stop] = spec.thickness
+        self.cloth_thickness = thick[local]
+        self.thickness = float(thick.max(initial=0.0))     # the Bridson pipeline's contact distance
+        self.never_contact = np.zeros(n_local, dtype=bool)  # pins keep their constraint
+        self.never_contact[sim.pinned_local] = True
+        self.never_contact[sim.slide_local] = True
+        self.gravity_norm = float(np.linalg.norm(cfg.gravity)) if cfg.has("gravity") else 0.0
+        if cfg.has("collisions"):
+            for spec in cfg.colliders:
+                self._add_collider(spec)
+        if self.mesh_colliders or self.self_collision:
+            from .parallel.collide import build_collisions
+            self.detector = build_collisions(sim.comm, model, sim.layout, self.mesh_colliders,
+                                             self.self_collision)
+            self._mass = model.vertex_mass.astype(np.float64)
+            self._pinned = np.zeros(model.num_vertices, dtype=bool)
+            self._pinned[model.pinned] = True
+            if model.slide_vertices is not None:
+                self._pinned[model.slide_vertices] = True   # held: kinematic for impulses
+            self._owned = sim.layout.owned_input
+
+    @property
+    def d_max(self) -> float:
+        """The largest contact distance d (cloth + collider thickness)."""
+        return float(np.max(self.cloth_thickness, initial=0.0)) + max(
+            [c[2] for c in self.colliders] + [0.0])
+
+    @property
+    def has_bodies(self) -> bool:
+        return bool(self.colliders)
+
+    @property
+    def has_response(self) -> bool:
+        return bool(self.colliders) or self.detector is not None
+
+    def _add_collider(self, spec) -> None:
+        from .collision.colliders import (AnalyticCollider, Box, Capsule, Plane, RigidMotion,
+                                          Sphere, load_mesh_collider)
+        motion = None
+        if spec.motion is not None:
+            motion = RigidMotion(spec.motion.times, spec.motion.translations, spec.motion.rotations)
+        if spec.shape != "mesh":
+            shapes = {"plane": Plane, "sphere": Sphere, "capsule": Capsule, "box": Box}
+            body = AnalyticCollider(shapes[spec.shape](**dict(spec.geometry)), motion,
+                                    spec.friction, spec.thickness)
+            self.colliders.append((lambda x, t, maxd, b=body: b.query(x, t), spec.friction,
+                                   spec.thickness, "analytic"))
+            return
+        mesh = load_mesh_collider(list(spec.files), frame_rate=spec.frame_rate, motion=motion,
+                                  friction=spec.friction, thickness=spec.thickness)
+        if spec.scale != 1.0:
+            mesh.frames *= spec.scale
+        if spec.method == "image":
+            from .collision.image_collider import ImageSpaceCollider
+            img = ImageSpaceCollider(mesh, resolution=tuple(spec.resolution),
+                                     axis="xyz".index(spec.axis))
+            self.colliders.append((img.query, spec.friction, spec.thickness, "image"))
+            self.image_error = getattr(img, "error_bound", None)
+            return
+        from .collision.mesh_query import MeshProximity
+        prox = MeshProximity(mesh)
+        self.colliders.append((prox.query, spec.friction, spec.thickness, "mesh"))
+        self.mesh_colliders.append(mesh)
+
+    # ------------------------------------------------------------ queries
+    def query(self, x, t, margin=np.inf):
+        """(phi (k, n), normal (k, n, 3), velocity (k, n, 3), d (k, n)) at x;
+        phi = +inf where a mesh collider is farther than ``margin``."""
+        k, n = len(self.colliders), x.shape[0]
+        phis, normals, vels = np.empty((k, n)), np.zeros((k, n, 3)), np.zeros((k, n, 3))
+        offsets = np.empty((k, n))
+        for j, (q, _, dc, _) in enumerate(self.colliders):
+            offsets[j] = self.cloth_thickness[:n] + dc
+            maxd = margin if np.isscalar(margin) else float(np.max(margin[j], initial=0.0))
+            phis[j], normals[j], vels[j] = q(x, t, maxd)
+        return phis, normals, vels, offsets
+
+    # ------------------------------------------------------------- stages
+    def bodies(self, t, h, missed=None):
+        """The contact set of the attempt on every local vertex (owned and
+        ghosts). ``missed`` (k, n_local) bool: contacts an earlier pass of the
+        attempt missed (they join whatever their prediction says)."""
+        from .collision.response import detect
+        sim = self.sim
+        speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", sim.v, sim.v), initial=0.0)))
+        reach = self.d_max + h * speed + h * h * self.gravity_norm    # how far a vertex can get this step
+        phis, normals, vels, offsets = self.query(sim.x, t, np.inf if missed is not None else reach)
+        margin = offsets + h * h * self.gravity_norm
+        penetrating = np.any(phis < offsets, axis=0)
+        exclude = self.never_contact | (self.released & ~penetrating)
+        if missed is not None:
+            exclude = exclude & ~missed.any(axis=0)
+            margin = np.where(missed, np.inf, margin)
+        frictions = np.array([c[1] for c in self.colliders])
+        return detect(phis, normals, vels, sim.v, offsets, frictions, h, margin, exclude)
+
+    def missed_contacts(self, result, h, missed):
+        """(k, n_local) bool of free vertices ending deeper than MISSED_FRACTION d
+        inside a collider without a contact constraint (accumulated over the
+        passes), or None if there is none on any rank.  Collective."""
+        sim = self.sim
+        n, k = sim.n_owned, len(self.colliders)
+        phis, _, _, offsets = self.query(result.x, sim.time + h, self.d_max)
+        free = ~self.never_contact[:n]
+        free[self.contacts.index[self.contacts.index < n]] = False
+        deep = (offsets - phis > MISSED_FRACTION * offsets) & free[None]
+        if sim.comm.max(np.array([float(deep.any())]))[0] == 0.0:
+            return None
+        flags = np.zeros((sim.n_local, k))
+        flags[:n] = deep.T
+        sim.ghosts.update(flags)
+        new = flags.T > 0.5
+        return new if missed is None else (new | missed)
+
+    def response(self, result, h):
+        """After the solve: friction (Coulomb, or Eq. 15 for image-space
+        colliders) on the contacts, adhesive contacts marked for release, the
+        Bridson pipeline for triangle contact, the position fail-safe.
+        Collective."""
+        from .collision.response import friction, normal_impulse
+        sim = self.sim
+        n = sim.n_owned
+        x_new, v_new = result.x.copy(), result.v.copy()
+        gain = getattr(sim.integrator, "position_gain", None) or h
+        released = np.zeros((sim.n_local, 1))
+        count = 0
+        c = self.contacts
+        if c is not None:
+            mine = c.index < n
+            idx = c.index[mine]
+            count = int(idx.size)
+            if idx.size:
+                f0 = sim._first_forces if sim._first_forces is not None else np.zeros((sim.n_local, 3))
+                normal = c.normal[mine]
+                v_free = sim.v[idx] + h * f0[idx] / sim.mass[idx, None]
+                dvn = normal_impulse(v_new[idx], v_free, normal)
+                released[idx[dvn < 0.0], 0] = 1.0
+                mu = c.friction[mine]
+                image = np.array([self.colliders[j][3] == "image" for j in c.collider[mine]],
+                                 dtype=bool)
+                vf = v_new[idx].copy()
+                if np.any(mu[~image] > 0):
+                    vf[~image] = friction(v_new[idx][~image], c.velocity[mine][~image],
+                                          normal[~image], mu[~image], dvn[~image])
+                if image.any():      # seed 002 Eq. 15: C_fric keeps 1 - mu of the tangential velocity
+                    from .collision.imagespace import velocity_response
+                    vf[image] = velocity_response(v_new[idx][image], normal[image],
+                                                  c.velocity[mine][image],
+                                                  np.maximum(0.0, 1.0 - mu[image]), 0.0)
+                x_new[idx] += gain * (vf - v_new[idx])
+                v_new[idx] = vf
+            sim.ghosts.update(released)
+            self.pending_released = released[:, 0] > 0.5
+        if self.detector is not None:
+            x_new, v_new = self._triangle_contact(x_new, v_new, h, gain)
+        pen, moved = -np.inf, 0
+        if self.colliders:
+            x_new, v_new, pen, moved = self._failsafe(x_new, v_new, h)
+        self.diag.update(contacts=count, max_penetration=pen, projected_vertices=moved)
+        result.x, result.v = x_new, v_new
+        return result
+
+    def _triangle_contact(self, x_new, v_new, h, gain):
+        """Bridson et al. 2002 on the all-gathered cloth plus the mesh
+        colliders' vertices (infinite mass); every rank runs it on the same
+        canonical candidates and keeps its own rows."""
+        from .collision.impulses import resolve
+        sim, det = self.sim, self.detector
+        n = sim.n_owned
+        t0, t1 = sim.time, sim.time + h
+        rows = det.gather(np.concatenate([sim.x[:n], x_new], axis=1))
+        x0 = [rows[:, :3]]
+        x1 = [rows[:, 3:]]
+        for mesh in self.mesh_colliders:
+            x0.append(mesh.vertices(t0))
+            x1.append(mesh.vertices(t1))
+        X0, X1 = np.concatenate(x0), np.concatenate(x1)
+        U = (X1 - X0) / h
+        inv_mass = np.zeros(X0.shape[0])
+        free = ~self._pinned
+        inv_mass[:det.geometry.n_cloth][free] = 1.0 / self._mass[free]
+        g = det.geometry
+        mu = max([c[1] for c in self.colliders if c[3] == "mesh"] + [0.0])
+        U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness, mu,
+                            lambda a, b: det.candidates(a, b, self.thickness))
+        mine = self._owned
+        dU = U2[mine] - U[mine]
+        x_new = x_new + h * dU
+        v_new = v_new + dU * (h / gain)
+        self.diag["impulse_hits"] = float(sum(stats.get("ccd_hits", [0])) if isinstance(
+            stats.get("ccd_hits"), (list, tuple)) else stats.get("ccd_hits", 0))
+        self.diag["impact_zone_vertices"] = float(stats.get("zone_vertices", 0))
+        if self.self_collision:
+            X = np.concatenate([X0[:g.n_cloth] + h * U2[:g.n_cloth]] + x1[1:])
+            self.diag["self_intersections"] = float(det.count_intersections(X))
+        return x_new, v_new
+
+    def _failsafe(self, x_new, v_new, h):
+        """Distance-field colliders at the end of the step: vertices inside
+        moved out along n (inward relative normal velocity removed).  The
+        penetration diagnostic is what the solve (and friction) left.
+        Open meshes are left to the CCD pipeline (a distance cannot say on
+        which side of a zero-thickness panel a vertex belongs)."""
+        from .collision.response import project
+        sim = self.sim
+        n = sim.n_owned
+        free = ~self.never_contact[:n]
+        reach = self.d_max
+        phis, normals, vels, offsets = self.query(x_new, sim.time + h, reach)
+        pen = float(np.max((offsets - phis)[:, free], initial=-np.inf))
+        moved = np.zeros(n, dtype=bool)
+        for j, col in enumerate(self.colliders):
+            if col[3] == "mesh" and not self._closed(j):
+                continue
+            if moved.any():     # an earlier collider's projection moved vertices: query again
+                phis[j], normals[j], vels[j] = col[0](x_new, sim.time + h, reach)
+            xs, vs, inside = project(x_new[free], v_new[free], phis[j][free], normals[j][free],
+                                     vels[j][free], offsets[j][free])
+            x_new[free], v_new[free] = xs, vs
+            moved[np.nonzero(free)[0][inside]] = True
+        return x_new, v_new, pen, int(moved.sum())
+
+    def _closed(self, j) -> bool:
+        q = self.colliders[j][0]
+        return bool(getattr(getattr(q, "__self__", None), "closed", True))
+
+    def accepted(self) -> None:
+        if self.pending_released is not None:
+            self.released = self.pending_released
+
+    def diagnostics(self) -> dict:
+        """Global counts and maxima (collective)."""
+        sim = self.sim
+        out = {}
+        if self.colliders:
+            d = self.diag
+            sums = sim.comm.sum(np.array([float(d.get("contacts", 0)),
+                                          float(d.get("projected_vertices", 0))]))
+            pen = sim.comm.max(np.array([float(d.get("max_penetration", -np.inf))]))[0]
+            out.update(contacts=sums[0], max_penetration=pen, projected_vertices=sums[1])
+        if self.detector is not None:     # replicated values: the same on every rank
+            out["impulse_hits"] = self.diag.get("impulse_hits", 0.0)
+            out["impact_zone_vertices"] = self.diag.get("impact_zone_vertices", 0.0)
+            if self.self_collision:
+                out["self_intersections"] = self.diag.get("self_intersections", 0.0)
+        return out

@@ -1,0 +1,118 @@
+"""Distributed detection over the replicated BVH (distcloth/parallel/collide.py):
+on a frozen snapshot the primitive pairs within the thickness found on any
+rank count equal the serial brute-force set, and the self-intersection count
+equals the exact oracle's."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+THICK = 0.004
+
+
+def _scene():
+    from distcloth.config.load import config_from_dict
+    piece = lambda name, z, shift: {
+        "name": name, "mesh": {"grid": {"size": [0.2, 0.2], "resolution": [13, 13],
+                                        "pattern": "alternating"},
+                               "center": [shift, 0.5 * shift, z]}}
+    raw = {"cloth": [piece("a", 0.0, 0.0), piece("b", 0.003, 0.004)],
+           "effects": ["gravity", "membrane", "self_collision"],
+           "output": {"file": "unused.h5"}}
+    return config_from_dict(raw, str(ROOT), "pairs")
+
+
+def snapshot(model, seed=3):
+    """Two stacked sheets, crumpled a little: a smooth random bump field of
+    amplitude ~ the gap, so the layers come within the thickness in patches,
+    touch in places and pass through each other in a few."""
+    rng = np.random.default_rng(seed)
+    x = np.asarray(model.rest_positions, dtype=np.float64).copy()
+    k = rng.normal(size=(6, 2)) * 25.0
+    ph = rng.uniform(0, 2 * np.pi, size=6)
+    amp = rng.uniform(0.0005, 0.0015, size=6)
+    bump = (amp[None] * np.sin(x[:, :2] @ k.T + ph[None])).sum(axis=1)
+    x[:, 2] += bump * np.where(np.arange(x.shape[0]) < x.shape[0] // 2, 1.0, -1.0)
+    return x
+
+
+def brute_force(x, tri, edges):
+    from distcloth.collision.proximity import edge_edge_contacts, vertex_face_contacts
+    nv, nt, ne = x.shape[0], tri.shape[0], edges.shape[0]
+    vf = np.stack(np.meshgrid(np.arange(nv), np.arange(nt), indexing="ij"), -1).reshape(-1, 2)
+    i, j = np.triu_indices(ne, 1)
+    ee = np.stack([i, j], axis=1)
+    a = vertex_face_contacts(x, tri, vf, THICK)
+    b = edge_edge_contacts(x, edges, ee, THICK)
+    return (np.stack([a.vertex, a.face], 1).reshape(-1, 2),
+            np.stack([b.edge_a, b.edge_b], 1).reshape(-1, 2))
+
+
+def distributed(comm_world=None):
+    from distcloth.parallel.comm import Comm, partition_on_root
+    from distcloth.parallel.collide import build_collisions
+    from distcloth.parallel.partition import build_layout
+    from distcloth.scene import build_model
+    comm = Comm()
+    model = build_model(_scene())
+    xadj, adjncy = model.matrix_graph()
+    part = partition_on_root(comm, xadj, adjncy)
+    layout = build_layout(xadj, adjncy, model.spring_vertices, part, comm.rank, comm.size)
+    det = build_collisions(comm, model, layout, self_collision=True)
+    x = snapshot(model)
+    owned = det.gather(x[layout.owned_input])        # round trip through the all-gather
+    assert np.array_equal(owned, x)
+    vf, ee = det.proximity_pairs(x, THICK)
+    return model, det, x, vf, ee, det.count_intersections(x)
+
+
+def test_pairs_equal_serial_brute_force():
+    from distcloth.collision.tritri import count_self_intersections
+    model, det, x, vf, ee, hits = distributed()
+    g = det.geometry
+    bvf, bee = brute_force(x, g.tri, g.edges)
+    assert bvf.shape[0] > 50 and bee.shape[0] > 50      # the snapshot has many close pairs
+    assert np.array_equal(vf, bvf)
+    assert np.array_equal(ee, bee)
+    assert hits == count_self_intersections(x, g.tri) > 0
+
+
+@pytest.mark.rank0_only
+@pytest.mark.parametrize("ranks", [1, 3])
+def test_pairs_independent_of_rank_count(tmp_path, ranks):
+    import subprocess
+    from conftest import clean_env
+    out = tmp_path / f"pairs{ranks}.npz"
+    cmd = ["mpiexec", "--oversubscribe", "-n", str(ranks), sys.executable, __file__, str(out)]
+    p = subprocess.run(cmd, env=clean_env(), cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr[-3000:]
+    got = np.load(out)
+    model, det, x, vf, ee, hits = distributed_serial()
+    bvf, bee = brute_force(x, det.geometry.tri, det.geometry.edges)
+    assert np.array_equal(got["vf"], bvf) and np.array_equal(got["ee"], bee)
+    assert int(got["hits"]) > 0
+
+
+def distributed_serial():
+    """The same snapshot's geometry on this process alone (no collectives)."""
+    from distcloth.collision.geometry import CollisionGeometry
+    from distcloth.scene import build_model
+
+    class _Det:
+        pass
+    model = build_model(_scene())
+    det = _Det()
+    det.geometry = CollisionGeometry(model.triangles, model.num_vertices,
+                                     np.zeros(len(model.triangles), np.int64), 1)
+    return model, det, snapshot(model), None, None, None
+
+
+if __name__ == "__main__":       # worker: mpiexec -n R python tests/test_collision_parallel.py OUT
+    from mpi4py import MPI
+    _, _, _, vf, ee, hits = distributed()
+    if MPI.COMM_WORLD.Get_rank() == 0:
+        np.savez(sys.argv[1], vf=vf, ee=ee, hits=hits)
