@@ -40,7 +40,8 @@ CASES = [
      [[33, 33], [65, 65]], 0.5, ["effects=[gravity, membrane, bending, damping, collisions]"]),
     ("cloth on body (image 512²)", "cloth_on_body.yaml", "cloth.0.mesh.grid.resolution",
      [[33, 33], [65, 65]], 0.5, ["effects=[gravity, membrane, bending, damping, collisions]",
-                                 "colliders.0.method=image", "colliders.0.resolution=[512, 512]"]),
+                                 "colliders.0.method=image", "colliders.0.resolution=[512, 512]",
+                                 "colliders.0.axis=y"]),
 ]
 CDR = ("collision:bodies", "collision:response")
 

@@ -1,4 +1,5 @@
-"""Small meshes the collision tests share: an icosphere and a split-square grid."""
+"""Small meshes the collision tests share (an icosphere, a split-square grid)
+and the generalised winding number used as an inside/outside oracle."""
 from __future__ import annotations
 
 import numpy as np
@@ -42,3 +43,18 @@ def grid_mesh(nx, ny, h=1.0):
     tri = np.concatenate([np.stack([v(a, b), v(a + 1, b), v(a + 1, b + 1)], 1),
                           np.stack([v(a, b), v(a + 1, b + 1), v(a, b + 1)], 1)])
     return x, tri.astype(np.int64)
+
+
+def winding_number(pts, x, tri, chunk=256):
+    """Generalised winding number (solid angles, Van Oosterom & Strackee 1983):
+    ~1 inside a closed outward mesh, ~0 outside."""
+    out = np.empty(pts.shape[0])
+    for s in range(0, pts.shape[0], chunk):
+        p = pts[s:s + chunk, None, :]
+        a, b, c = (x[tri[:, k]][None] - p for k in range(3))
+        la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
+        det = np.einsum("ijk,ijk->ij", a, np.cross(b, c))
+        dots = (la * lb * lc + np.einsum("ijk,ijk->ij", a, b) * lc
+                + np.einsum("ijk,ijk->ij", b, c) * la + np.einsum("ijk,ijk->ij", c, a) * lb)
+        out[s:s + chunk] = 2.0 * np.arctan2(det, dots).sum(axis=1) / (4.0 * np.pi)
+    return out

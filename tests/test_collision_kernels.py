@@ -626,3 +626,28 @@ def test_count_self_intersections_mesh():
     shared = (tri[got[:, 0]][:, :, None] == tri[got[:, 1]][:, None, :]).sum((1, 2))
     assert np.any(shared == 0) and np.any(shared == 1)
     assert np.array_equal(got, _mesh_oracle(xn, tri))
+
+
+def test_nearly_coplanar_disjoint_triangles_do_not_intersect():
+    # two triangles of the flat ribbon lying on its tilted ramp
+    # (configs/ribbon.yaml, step 65, exact coordinates): coplanar to 1e-17 m
+    # and 7 mm apart in their plane; without the orient3d error filter the
+    # signs of rounding noise reported an intersection both ways round
+    from distcloth.collision.tritri import tri_tri_intersect
+    P = np.array([[-0.062412385249151, 0.36616976610630403, 0.38740297363781795],
+                  [-0.049927157408656025, 0.3861041784214118, 0.38540953240630715],
+                  [-0.06241072025441475, 0.38610297305955626, 0.3854096529424927]])
+    Q = np.array([[-0.07489454227073498, 0.3861009069022923, 0.3854098595582191],
+                  [-0.06240828543901254, 0.4060343602569031, 0.38341651422275796],
+                  [-0.07489253047520174, 0.4060322233408098, 0.3834167279143673]])
+    assert not tri_tri_intersect(P[0], P[1], P[2], Q[0], Q[1], Q[2])
+    assert not tri_tri_intersect(Q[0], Q[1], Q[2], P[0], P[1], P[2])
+    # slid onto Q and tilted so that a corner pierces it: a crossing (exactly
+    # coplanar overlaps are covered by the tests above)
+    shifted = Q + 0.3 * (Q[1] - Q[0])
+    n = np.cross(Q[1] - Q[0], Q[2] - Q[0])
+    n /= np.linalg.norm(n)
+    pierce = shifted + 0.002 * n
+    pierce[0] -= 0.006 * n
+    assert tri_tri_intersect(pierce[0], pierce[1], pierce[2], Q[0], Q[1], Q[2])
+    assert tri_tri_intersect(Q[0], Q[1], Q[2], pierce[0], pierce[1], pierce[2])

@@ -63,9 +63,9 @@ def test_dropped_cloth_stays_outside(collider):
         assert r.min() >= 0.15 + d - 0.1 * d
 
 
-def incline_run(theta_deg, mu=0.4, steps=200, h=0.01):
-    """A stiff 0.1 m patch resting on a plane inclined by theta about y; returns
-    the centroid's displacement along the downhill direction at each step."""
+def incline_scene(theta_deg, mu=0.4, h=0.01):
+    """A stiff 0.1 m patch resting on a plane inclined by theta about y:
+    (scene, unit downhill direction along the plane)."""
     th = math.radians(theta_deg)
     n = np.array([math.sin(th), 0.0, math.cos(th)])
     d = 0.001
@@ -78,10 +78,16 @@ def incline_run(theta_deg, mu=0.4, steps=200, h=0.01):
         colliders=[{"name": "slope", "shape": "plane", "normal": n.tolist(), "offset": 0.0,
                     "friction": mu}],
         time={"end": 10.0, "step": h})
-    sim = make_sim(raw)
     down = np.array([0.0, 0.0, -1.0])
     down = down - (down @ n) * n
-    down /= np.linalg.norm(down)
+    return raw, down / np.linalg.norm(down)
+
+
+def incline_run(theta_deg, mu=0.4, steps=200, h=0.01):
+    """The centroid's displacement along the downhill direction at each step
+    of the incline_scene patch."""
+    raw, down = incline_scene(theta_deg, mu, h)
+    sim = make_sim(raw)
     c0 = gather_positions(sim).mean(axis=0)
     s = [0.0]
     for _ in range(steps):

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from meshes import icosphere
+from meshes import icosphere, winding_number
 import pytest
 from numba import njit
 
@@ -42,21 +42,6 @@ def brute_force(pts, x, tri):
     face = np.empty(pts.shape[0], np.int64)
     _brute(pts, np.ascontiguousarray(x), np.ascontiguousarray(tri, dtype=np.int64), dist, face)
     return dist, face
-
-
-def winding_number(pts, x, tri, chunk=256):
-    """Generalised winding number (solid angles, Van Oosterom & Strackee 1983):
-    ~1 inside a closed outward mesh, ~0 outside."""
-    out = np.empty(pts.shape[0])
-    for s in range(0, pts.shape[0], chunk):
-        p = pts[s:s + chunk, None, :]
-        a, b, c = (x[tri[:, k]][None] - p for k in range(3))
-        la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
-        det = np.einsum("ijk,ijk->ij", a, np.cross(b, c))
-        dots = (la * lb * lc + np.einsum("ijk,ijk->ij", a, b) * lc
-                + np.einsum("ijk,ijk->ij", b, c) * la + np.einsum("ijk,ijk->ij", c, a) * lb)
-        out[s:s + chunk] = 2.0 * np.arctan2(det, dots).sum(axis=1) / (4.0 * np.pi)
-    return out
 
 
 def random_directions(rng, n):

@@ -12,8 +12,10 @@ orientation predicates" (JGT 8(1), 2003): the same scheme as Möller (1997)
 but every decision is the sign of a 3x3 determinant of input point
 differences (no constructed intersection points, no divisions).  With
 double precision the signs are exact whenever the determinant is computed
-exactly (e.g. small integer coordinates) and otherwise wrong only for
-configurations within rounding of a degenerate one.  The coplanar case is a
+exactly (e.g. small integer coordinates); a determinant smaller than its
+forward error bound (Shewchuk's orient3d filter) is taken as zero, so a
+configuration within rounding of a degenerate one is decided as that
+degenerate (touching or coplanar) case rather than by the sign of noise.  The coplanar case is a
 2D test in the axis plane best aligned with the triangles: two closed
 triangles overlap iff a vertex of one lies in the other or two edges cross.
 
@@ -53,7 +55,17 @@ def _side(p, q, r, x):
     u0 = p[0] - r[0]; u1 = p[1] - r[1]; u2 = p[2] - r[2]
     v0 = q[0] - r[0]; v1 = q[1] - r[1]; v2 = q[2] - r[2]
     w0 = x[0] - r[0]; w1 = x[1] - r[1]; w2 = x[2] - r[2]
-    return (u1 * v2 - u2 * v1) * w0 + (u2 * v0 - u0 * v2) * w1 + (u0 * v1 - u1 * v0) * w2
+    det = (u1 * v2 - u2 * v1) * w0 + (u2 * v0 - u0 * v2) * w1 + (u0 * v1 - u1 * v0) * w2
+    # Shewchuk's static filter for orient3d (error bound (7 + 56 eps) eps times
+    # the permanent): a determinant within rounding has no reliable sign, and
+    # a random one sends nearly coplanar triangles (flat cloth on a flat
+    # body) down the transversal branch, which then reports false crossings;
+    # 0 sends them to the coplanar 2D test instead
+    perm = ((abs(u1 * v2) + abs(u2 * v1)) * abs(w0) + (abs(u2 * v0) + abs(u0 * v2)) * abs(w1)
+            + (abs(u0 * v1) + abs(u1 * v0)) * abs(w2))
+    if abs(det) <= 7.771561172376103e-16 * perm:
+        return 0.0
+    return det
 
 
 @njit(cache=True)
@@ -323,15 +335,52 @@ def count_self_intersections(x, tri, candidate_pairs=None) -> int:
 
 
 @njit(cache=True)
-def _tri_tri_batch(P, Q, out):
+def _plane_gap(p, q, r, a, b, c):
+    """Largest distance of a, b, c from the plane of pqr (inf if pqr is degenerate)."""
+    n = np.cross(q - p, r - p)
+    nn = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    if nn == 0.0:
+        return np.inf
+    return max(abs(np.dot(a - p, n)), abs(np.dot(b - p, n)), abs(np.dot(c - p, n))) / nn
+
+
+@njit(cache=True)
+def tri_tri_intersect_tol(p1, q1, r1, p2, q2, r2, coplanar_tol):
+    """``tri_tri_intersect``, except that triangles whose planes coincide to
+    within ``coplanar_tol`` times their longest edge (each triangle's
+    vertices that close to the other's plane) are decided by the coplanar
+    2D overlap test.  Two triangles of a flat cloth lying on a flat body
+    are coplanar only to rounding (1e-17 m); exact signs of such offsets
+    then decide "touching" configurations in ways that depend on the last
+    bit, which is not what a count of *crossings* should see."""
+    if coplanar_tol > 0.0:
+        L = 0.0
+        for u, v in ((p1, q1), (q1, r1), (r1, p1), (p2, q2), (q2, r2), (r2, p2)):
+            L = max(L, np.sqrt(np.sum((u - v) ** 2)))
+        tol = coplanar_tol * L
+        if _plane_gap(p2, q2, r2, p1, q1, r1) <= tol and _plane_gap(p1, q1, r1, p2, q2, r2) <= tol:
+            return _coplanar_tri_tri(p1, q1, r1, p2, q2, r2)
+    return tri_tri_intersect(p1, q1, r1, p2, q2, r2)
+
+
+@njit(cache=True)
+def _tri_tri_batch(P, Q, coplanar_tol, out):
     for k in range(P.shape[0]):
-        out[k] = tri_tri_intersect(P[k, 0], P[k, 1], P[k, 2], Q[k, 0], Q[k, 1], Q[k, 2])
+        out[k] = tri_tri_intersect_tol(P[k, 0], P[k, 1], P[k, 2], Q[k, 0], Q[k, 1], Q[k, 2],
+                                       coplanar_tol)
 
 
-def tri_tri_batch(P, Q) -> np.ndarray:
-    """Row-wise ``tri_tri_intersect`` of triangles P, Q (n, 3, 3) -> bool (n,)."""
+# relative plane coincidence under which the crossing counts of the simulator
+# and its tests judge a pair as coplanar (1e-9 of an edge: 1e-11 m on a 1 cm
+# mesh, far below any cloth thickness, far above rounding)
+CROSSING_COPLANAR_TOL = 1e-9
+
+
+def tri_tri_batch(P, Q, coplanar_tol: float = 0.0) -> np.ndarray:
+    """Row-wise intersection of triangles P, Q (n, 3, 3) -> bool (n,):
+    ``tri_tri_intersect``, or ``tri_tri_intersect_tol`` with coplanar_tol > 0."""
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3, 3)
     Q = np.ascontiguousarray(Q, dtype=np.float64).reshape(-1, 3, 3)
     out = np.zeros(P.shape[0], np.bool_)
-    _tri_tri_batch(P, Q, out)
+    _tri_tri_batch(P, Q, float(coplanar_tol), out)
     return out

@@ -5,9 +5,12 @@ whole hierarchy (its own sub-mesh tree plus everybody else's, combined at
 the top), so one all-gather of positions per collision phase is all the
 communication detection needs before each copy is refitted; the top-level
 tests (a rank's self-collision, sub-mesh pairs of different ranks whose
-volumes overlap, a sub-mesh against each collider) are the tasks, assigned
-here statically (distcloth.collision.geometry.CollisionGeometry.static_owner;
-work stealing replaces that assignment later).
+volumes overlap, a sub-mesh against each collider) are the tasks.  Each
+starts on the rank CollisionGeometry.static_owner gives it; with
+``stealing`` (the default) the ranks then balance the traversal by task
+creation and receiver-initiated round-robin work stealing
+(distcloth/parallel/steal.py, seed 000 Part 1 §5.8.2), otherwise every rank
+runs exactly its own tasks.
 
 Each rank runs its tasks, turns the triangle pairs into vertex-face and
 edge-edge candidates (the narrow phase runs where the task ran) and the
@@ -24,17 +27,33 @@ import numpy as np
 
 from ..collision.geometry import CollisionGeometry
 from ..collision.proximity import edge_edge_contacts, vertex_face_contacts
-from ..collision.traverse import run_tests, unique_rows
-from ..collision.tritri import tri_tri_batch
+from ..collision.traverse import unique_rows
+from ..collision.tritri import CROSSING_COPLANAR_TOL, tri_tri_batch
+from .steal import run_tasks
 
 
 class DistributedCollisions:
     """Collective collision queries of one cloth partition (every method is
     collective: all ranks call it in the same order with the same arguments
-    apart from their own rows)."""
+    apart from their own rows).
 
-    def __init__(self, comm, layout, geometry: CollisionGeometry, self_collision: bool):
+    Load balancing of the traversal (distcloth/parallel/steal.py):
+    ``stealing`` (default True) turns on task creation (threshold
+    tau = a * sigma + b) and work stealing, ``chunk`` tests run between two
+    polls; ``steal_options``: further keywords of ``run_tasks`` (delay,
+    delay_prob, seed, timeout: test modes).  ``last_phase_stats`` holds this
+    rank's statistics of the latest traversal (run_tasks' stats dict);
+    ``counters`` accumulates tests, tasks_created, tasks_stolen,
+    steals_refused, busy_time and traverse_time (wall) over the phases."""
+
+    def __init__(self, comm, layout, geometry: CollisionGeometry, self_collision: bool,
+                 stealing: bool = True, a: float = 2.0, b: float = 8, chunk: int = 256,
+                 steal_options: dict | None = None):
         self.comm = comm
+        self.stealing = bool(stealing)
+        self.a, self.b, self.chunk = float(a), b, int(chunk)
+        self.steal_options = dict(steal_options or {})
+        self.last_phase_stats: dict = {}
         self.mpi = comm.mpi_comm
         self.geometry = geometry
         self.self_collision = bool(self_collision)
@@ -47,7 +66,9 @@ class DistributedCollisions:
                             [order, counts, self._displs, _mpi_type(self.comm, np.int64)])
         self._order = order          # input index of each all-gathered row
         self.counters = {"phases": 0, "refits": 0, "tasks": 0, "tests": 0, "tri_pairs": 0,
-                         "candidates": 0, "detect_time": 0.0}
+                         "candidates": 0, "detect_time": 0.0, "tasks_created": 0,
+                         "tasks_stolen": 0, "steals_refused": 0, "busy_time": 0.0,
+                         "traverse_time": 0.0}
 
     # ---------------------------------------------------------------- data
     def gather(self, owned_rows: np.ndarray) -> np.ndarray:
@@ -74,17 +95,27 @@ class DistributedCollisions:
 
     # ----------------------------------------------------------- detection
     def my_triangle_pairs(self, x0, x1=None, pad: float = 0.0) -> np.ndarray:
-        """Triangle pairs (global ids) whose boxes overlap, from this rank's
-        statically assigned top-level tasks (not collective: positions are
-        replicated)."""
+        """Triangle pairs (global ids) whose boxes overlap, found on this
+        rank: the union over the ranks is every overlapping pair, each on one
+        rank.  Collective with ``stealing`` (the ranks exchange tasks); without
+        it each rank runs its statically assigned top-level tasks alone."""
         g = self.geometry
         trees = g.trees(x0, x1, pad)
         tests = g.root_tests(trees, self.self_collision)
-        mine = tests[g.static_owner(tests) == self.comm.rank] if tests.size else tests
-        rows = run_tests(trees, mine) if mine.shape[0] else np.zeros((0, 4), np.int64)
-        self.counters["refits"] += 1
-        self.counters["tasks"] += int(mine.shape[0])
-        self.counters["tri_pairs"] += int(rows.shape[0])
+        owner = g.static_owner(tests) if tests.size else np.zeros(0, np.int64)
+        rows, stats = run_tasks(self.comm, trees, tests, owner, stealing=self.stealing,
+                                a=self.a, b=self.b, chunk=self.chunk, **self.steal_options)
+        self.last_phase_stats = stats
+        c = self.counters
+        c["refits"] += 1
+        c["tasks"] += int(stats["tasks_run"])
+        c["tests"] += int(stats["tests"])
+        c["tasks_created"] += int(stats["tasks_created"])
+        c["tasks_stolen"] += int(stats["tasks_stolen"])
+        c["steals_refused"] += int(stats["steals_refused"])
+        c["busy_time"] += float(stats["busy"])
+        c["traverse_time"] += float(stats["wall"])
+        c["tri_pairs"] += int(rows.shape[0])
         return g.triangle_pairs(rows)
 
     def candidates(self, x0, x1, pad: float):
@@ -111,9 +142,10 @@ class DistributedCollisions:
                 np.stack([eec.edge_a, eec.edge_b], axis=1).reshape(-1, 2))
 
     def count_intersections(self, x) -> int:
-        """Collective: cloth triangle pairs that intersect (exact
-        Guigue-Devillers test on the pairs whose boxes overlap; pairs sharing
-        a vertex are not counted), summed over the tasks of all ranks."""
+        """Collective: cloth triangle pairs that cross (Guigue-Devillers on
+        the pairs whose boxes overlap, pairs coplanar to 1e-9 of an edge by
+        the 2D test; pairs sharing a vertex are not counted), summed over the
+        tasks of all ranks."""
         tp = self.my_triangle_pairs(x, x, 0.0)
         g = self.geometry
         if tp.shape[0]:
@@ -124,7 +156,7 @@ class DistributedCollisions:
         if tp.shape[0]:
             P = x[g.tri[tp[:, 0]]]
             Q = x[g.tri[tp[:, 1]]]
-            hits = int(np.count_nonzero(tri_tri_batch(P, Q)))
+            hits = int(np.count_nonzero(tri_tri_batch(P, Q, CROSSING_COPLANAR_TOL)))
         return int(self.comm.sum(np.array([float(hits)]))[0])
 
 
@@ -134,10 +166,12 @@ def _mpi_type(comm, dtype):
 
 
 def build_collisions(comm, model, layout, mesh_colliders=(), self_collision: bool = True,
-                     t0: float = 0.0) -> DistributedCollisions:
+                     t0: float = 0.0, **detector_options) -> DistributedCollisions:
     """The collision geometry of a partitioned model (a cloth triangle goes
     to the owner of its first vertex) and its distributed detector.
-    ``mesh_colliders``: MeshCollider objects (kinematic objects after the ranks)."""
+    ``mesh_colliders``: MeshCollider objects (kinematic objects after the ranks);
+    ``detector_options``: stealing, a, b, chunk, steal_options of
+    DistributedCollisions."""
     tri = np.asarray(model.triangles, dtype=np.int64)
     owner = np.asarray(layout.part)[tri[:, 0]] if tri.size else np.zeros(0, np.int64)
     rest = [np.asarray(model.rest_positions, dtype=np.float64)]
@@ -145,4 +179,4 @@ def build_collisions(comm, model, layout, mesh_colliders=(), self_collision: boo
     geometry = CollisionGeometry(tri, model.num_vertices, owner, comm.size,
                                  [(c.n_vertices, c.triangles) for c in mesh_colliders],
                                  rest=np.concatenate(rest))
-    return DistributedCollisions(comm, layout, geometry, self_collision)
+    return DistributedCollisions(comm, layout, geometry, self_collision, **detector_options)
