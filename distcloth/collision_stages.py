@@ -36,6 +36,8 @@ import numpy as np
 
 MAX_CONTACT_PASSES = 3   # solves per attempt at most when contacts were missed
 MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
+CANDIDATE_SLACK = 0.5    # the CCD passes of a step reuse their candidates while no end position
+                         # moved more than this fraction of the thickness (impulses.ReusedCandidates)
 
 
 class CollisionStages:
@@ -64,8 +66,10 @@ class CollisionStages:
                 self._add_collider(spec)
         if self.mesh_colliders or self.self_collision:
             from .parallel.collide import build_collisions
+            ws = cfg.work_stealing
             self.detector = build_collisions(sim.comm, model, sim.layout, self.mesh_colliders,
-                                             self.self_collision)
+                                             self.self_collision, stealing=ws.enabled, a=ws.a,
+                                             b=ws.b, chunk=ws.chunk)
             self._mass = model.vertex_mass.astype(np.float64)
             self._pinned = np.zeros(model.num_vertices, dtype=bool)
             self._pinned[model.pinned] = True
@@ -218,7 +222,7 @@ class CollisionStages:
         """Bridson et al. 2002 on the all-gathered cloth plus the mesh
         colliders' vertices (infinite mass); every rank runs it on the same
         canonical candidates and keeps its own rows."""
-        from .collision.impulses import resolve
+        from .collision.impulses import ReusedCandidates, resolve
         sim, det = self.sim, self.detector
         n = sim.n_owned
         t0, t1 = sim.time, sim.time + h
@@ -235,8 +239,9 @@ class CollisionStages:
         inv_mass[:det.geometry.n_cloth][free] = 1.0 / self._mass[free]
         g = det.geometry
         mu = max([c[1] for c in self.colliders if c[3] == "mesh"] + [0.0])
-        U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness, mu,
-                            lambda a, b: det.candidates(a, b, self.thickness))
+        found = ReusedCandidates(det.candidates, self.thickness, CANDIDATE_SLACK * self.thickness)
+        U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness, mu, found,
+                            hits=det.shared_hits)
         mine = self._owned
         dU = U2[mine] - U[mine]
         x_new = x_new + h * dU
@@ -297,4 +302,40 @@ class CollisionStages:
             out["impact_zone_vertices"] = self.diag.get("impact_zone_vertices", 0.0)
             if self.self_collision:
                 out["self_intersections"] = self.diag.get("self_intersections", 0.0)
+            out.update(self._traversal_diagnostics())
         return out
+
+    def traversal_summary(self) -> str | None:
+        """Collective: one line on the run's BVH traversals (load balance,
+        stealing), for the log; None without a detector."""
+        if self.detector is None:
+            return None
+        c = self.detector.counters
+        comm = self.sim.comm
+        busy = np.array([c["busy_time"]])
+        bmax, bsum = comm.max(busy)[0], comm.sum(busy)[0]
+        counts = comm.sum(np.array([c["tasks_created"], c["tasks_stolen"], c["steals_refused"],
+                                    c["tests"]], dtype=np.float64))
+        wall = comm.max(np.array([c["traverse_time"]]))[0]
+        mean = bsum / comm.size
+        ratio = bmax / mean if mean > 0 else 1.0
+        mode = "stealing" if self.detector.stealing else "static"
+        return (f"BVH traversal ({mode}): {c['refits']} phases, {wall:.2f} s wall, "
+                f"busy max/mean {ratio:.2f}, {int(counts[3])} tests, {int(counts[0])} tasks "
+                f"created, {int(counts[1])} stolen, {int(counts[2])} refused")
+
+    def _traversal_diagnostics(self) -> dict:
+        """The step's BVH traversal over the ranks (issue 5 instrumentation):
+        busy is CPU time inside traversal chunks, not polling; the balance
+        figure is traverse_busy_max / traverse_busy_mean."""
+        st = self.detector.take_step_stats()
+        comm = self.sim.comm
+        mx = comm.max(np.array([st["busy"], st["wall"], st["latency_max"]]))
+        sm = comm.sum(np.array([st["busy"], st["idle"], st["tests"], st["tasks_created"],
+                                st["tasks_stolen"], st["steals_refused"], st["msgs_sent"]],
+                               dtype=np.float64))
+        p = comm.size
+        return dict(traverse_wall=mx[1], traverse_busy_max=mx[0], traverse_busy_mean=sm[0] / p,
+                    traverse_idle_mean=sm[1] / p, traverse_tests=sm[2], tasks_created=sm[3],
+                    tasks_stolen=sm[4], steals_refused=sm[5], steal_messages=sm[6],
+                    steal_latency_max=mx[2])

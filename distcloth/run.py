@@ -111,8 +111,11 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         status, code = "failed", 1
     writer.close(status)
     wall = time.perf_counter() - t_start
+    traversal = sim.collisions.traversal_summary()      # collective
     if not quiet:
         log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
+        if traversal:
+            log(comm, traversal)
         log(comm, f"{status} in {wall:.2f} s: {os.path.abspath(path)} "
                   f"(+ {os.path.splitext(os.path.basename(path))[0]}.xdmf for ParaView)")
     _previews(cfg, comm, path)

@@ -36,7 +36,10 @@ DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_e
                "total_energy", "max_strain", "max_speed", "newton_iterations",
                "newton_residual", "ksp_iterations", "ksp_residual", "rejected_steps",
                "contacts", "max_penetration", "projected_vertices", "impulse_hits",
-               "impact_zone_vertices", "self_intersections")
+               "impact_zone_vertices", "self_intersections", "traverse_wall",
+               "traverse_busy_max", "traverse_busy_mean", "traverse_idle_mean", "traverse_tests",
+               "tasks_created", "tasks_stolen", "steals_refused", "steal_messages",
+               "steal_latency_max")
 MAX_SPEED = 1.0e3   # m/s: beyond this a cloth simulation has blown up
 
 

@@ -81,6 +81,25 @@ def test_pairs_equal_serial_brute_force():
     assert hits == count_self_intersections(x, g.tri) > 0
 
 
+def test_shared_ccd_hits_equal_serial():
+    # the distributed CCD narrow phase (each rank a block of the candidate
+    # rows, hits all-gathered in rank order) gives every rank the serial
+    # stencils bitwise: the layers of the snapshot pass through each other
+    # when swept from x to a flattened copy
+    from distcloth.collision.impulses import clean_pairs, collisions
+    model, det, x, vf, ee, hits = distributed()
+    g = det.geometry
+    x1 = x.copy()
+    x1[:, 2] = np.where(np.arange(x.shape[0]) < x.shape[0] // 2, 0.002, 0.0)
+    inv = np.ones(x.shape[0])
+    cvf, cee = clean_pairs(*det.candidates(x, x1, THICK), g.tri, g.edges, inv)
+    want = collisions(x, x1, g.tri, g.edges, cvf, cee, 1e-6)
+    got = det.shared_hits(x, x1, g.tri, g.edges, cvf, cee, 1e-6)
+    assert want[0].shape[0] > 20
+    for a, b in zip(want, got):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
 @pytest.mark.rank0_only
 @pytest.mark.parametrize("ranks", [1, 3])
 def test_pairs_independent_of_rank_count(tmp_path, ranks):

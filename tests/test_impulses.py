@@ -176,13 +176,18 @@ def test_friction_bounded_by_normal_change(mu):
 
 # ---------------------------------------------------------------- determinism
 
-def test_order_independent_and_reproducible():
+def _violent_field():
+    """A curved cloth under a smooth random velocity field that folds it
+    through itself within a step: (x0, tri, edges, inv_mass, u, th, h, finder)."""
     x0, tri = curved_cloth()
     edges = mesh_edges(tri)
-    inv = np.ones(len(x0))
     u = smooth_field(np.random.default_rng(0), amp=3.0)(x0)
-    th, h = 0.01, 0.05
-    base = I.serial_candidates(tri, edges, th)
+    th = 0.01
+    return x0, tri, edges, np.ones(len(x0)), u, th, 0.05, I.serial_candidates(tri, edges, th)
+
+
+def test_order_independent_and_reproducible():
+    x0, tri, edges, inv, u, th, h, base = _violent_field()
     rng = np.random.default_rng(7)
 
     def shuffled(x0_, x1_):
@@ -198,6 +203,38 @@ def test_order_independent_and_reproducible():
     assert sa["ccd_hits"][0] > 100
     assert np.array_equal(ua, ub) and np.array_equal(ua, uc)
     assert sa == sb == sc
+
+
+def test_reused_candidates_change_nothing():
+    # ReusedCandidates finds the pairs once with a bigger pad and reuses
+    # them while the end positions move less than the slack: the pipeline's
+    # result must be bitwise the one of a fresh detection every pass
+    x0, tri, edges, inv, u, th, h, base = _violent_field()
+
+    def detect(a, b, pad):
+        return I.serial_candidates(tri, edges, pad)(a, b)
+
+    ua, sa = I.resolve(x0, u, h, inv, tri, edges, th, 0.3, base)
+    assert sa["ccd_hits"][0] > 100 and len(sa["ccd_hits"]) > 2
+    # this field moves the end positions by more than th between passes, so
+    # a slack of th/2 re-detects; 5 th lets the passes reuse their pairs
+    for slack in (0.5 * th, 5 * th):
+        reused = I.ReusedCandidates(detect, th, slack)
+        ub, sb = I.resolve(x0, u, h, inv, tri, edges, th, 0.3, reused)
+        assert np.array_equal(ua, ub) and sa == sb
+    assert reused.detections < reused.calls      # it did reuse
+    # impact zones alone, where reused pairs are only re-tested when a vertex
+    # of theirs changed velocity: the same zones and velocities
+    za, qa = I.impact_zones(x0, u, h, inv, tri, edges, th, base)
+    zb, qb = I.impact_zones(x0, u, h, inv, tri, edges, th, I.ReusedCandidates(detect, th, 5 * th))
+    assert qa["zone_iterations"] > 2 and qa["remaining"] == 0
+    assert np.array_equal(za, zb)
+    assert {k: v for k, v in qa.items() if k != "parent"} == \
+        {k: v for k, v in qb.items() if k != "parent"}
+    # a move beyond the slack is detected afresh
+    n = reused.detections
+    reused(x0, x0 + h * ub + 6 * th)
+    assert reused.detections == n + 1
 
 
 # ---------------------------------------------------------------- crumpling cloth

@@ -25,7 +25,7 @@ from .checks import (exactly_one_of, format_value, join, read_bool, read_choice,
 from .schema import (DEFAULT_SOLVER, DRAPE_METHODS, DRAPE_STOP_ON, EFFECTS, GRID_CORNERS,
                      GRID_EDGES, GRID_PATTERNS, INTEGRATORS, MAT_TYPES, MATERIAL_MODELS,
                      COLLIDER_SHAPES, COLLIDER_METHODS, IMAGE_AXES, SHAPE_KEYS, ClothSpec, ColliderSpec, ConfigError,
-                     MotionSpec, DrapeSpec, GridSpec, MaterialSpec, MeshSpec,
+                     MotionSpec, DrapeSpec, StealSpec, GridSpec, MaterialSpec, MeshSpec,
                      OutputSpec, PinSpec, SceneConfig, TimeSpec, BENDING_MODELS,
                      STRAIN_MODELS)
 
@@ -62,9 +62,10 @@ TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_to
                     "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
 OUTPUT_KEYS = _leaves("file", "every", "preview")
 DRAPE_KEYS = _leaves("method", "stop_on", "tolerance", "max_iterations", "frame_every")
+STEAL_KEYS = _leaves("enabled", "a", "b", "chunk")
 SCENE_KEYS = {"scene": LEAF, "cloth": [CLOTH_KEYS], **_leaves("effects", "gravity", "drag"),
               "time": TIME_KEYS, "solver": ANY_KEY, "output": OUTPUT_KEYS, "drape": DRAPE_KEYS,
-              "colliders": [COLLIDER_KEYS]}
+              "colliders": [COLLIDER_KEYS], "work_stealing": STEAL_KEYS}
 
 MESH_SUFFIXES = (".obj", ".ply")
 OUTPUT_SUFFIXES = (".h5", ".hdf5")
@@ -129,10 +130,11 @@ def config_from_dict(raw: dict, base_dir: str, source_name: str) -> SceneConfig:
     output = _read_output(top.get("output"), "output", time)
     drape = _read_drape(top.get("drape"), "drape")
     colliders = _read_colliders(top.get("colliders"), "colliders", base_dir)
+    stealing = _read_stealing(top.get("work_stealing"), "work_stealing")
     if "collisions" in effects and not colliders:
         raise ConfigError("effects", list(effects),
                           "the collisions effect needs at least one entry under colliders:")
-    config = SceneConfig(drape=drape, colliders=colliders, scene=scene, cloth=cloth, effects=effects, gravity=gravity, drag=drag,
+    config = SceneConfig(drape=drape, colliders=colliders, work_stealing=stealing, scene=scene, cloth=cloth, effects=effects, gravity=gravity, drag=drag,
                          time=time, solver=solver, mat_type=mat_type, warm_start=warm_start, pc_rebuild_every=rebuild,
                          output=output)
     source_text = yaml.dump(config_to_dict(config), Dumper=_ResolvedDumper, sort_keys=False)
@@ -592,6 +594,17 @@ def _read_drape(value: Any, key: str) -> DrapeSpec:
     )
 
 
+def _read_stealing(value: Any, key: str) -> StealSpec:
+    section = read_section(value, key, STEAL_KEYS)
+    d = StealSpec()
+    return StealSpec(
+        enabled=_optional(section, key, "enabled", d.enabled, read_bool),
+        a=_optional(section, key, "a", d.a, read_float, at_least=0),
+        b=_optional(section, key, "b", d.b, read_float, at_least=1),
+        chunk=_optional(section, key, "chunk", d.chunk, read_int, at_least=1),
+    )
+
+
 def _read_output_file(value: Any, key: str) -> str:
     """Kept relative to the current directory, as given (normalised)."""
     allowed = "a file name ending in " + " or ".join(OUTPUT_SUFFIXES)
@@ -756,6 +769,7 @@ def config_to_dict(config: SceneConfig) -> dict:
         "drape": dataclasses.asdict(config.drape),
         **({"colliders": [_collider_to_dict(c) for c in config.colliders]}
            if config.colliders else {}),
+        "work_stealing": dataclasses.asdict(config.work_stealing),
     }
 
 

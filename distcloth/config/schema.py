@@ -183,6 +183,16 @@ class DrapeSpec:
 
 
 @dataclass(frozen=True)
+class StealSpec:
+    """Load balancing of the collision traversal (seed 000 Part 1 §5.8.2;
+    distcloth/parallel/steal.py).  Off: the static top-level assignment."""
+    enabled: bool = True
+    a: float = 2.0               # task creation threshold tau = a * sigma + b (sigma: pool size)
+    b: float = 8.0
+    chunk: int = 256             # traversal tests between two polls for steal requests
+
+
+@dataclass(frozen=True)
 class OutputSpec:
     file: str = "out/result.h5"
     every: float = 0.1
@@ -203,6 +213,7 @@ class SceneConfig:
     pc_rebuild_every: int = 1      # rebuild the preconditioner every k-th solve, reuse it between
     output: OutputSpec = field(default_factory=OutputSpec)
     drape: DrapeSpec = field(default_factory=DrapeSpec)
+    work_stealing: StealSpec = field(default_factory=StealSpec)
     colliders: tuple[ColliderSpec, ...] = ()
     source_text: str = ""          # the resolved config as YAML, for the output file
 
