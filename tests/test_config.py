@@ -186,7 +186,8 @@ ERRORS = [
     ("time", {"stepp": 0.01},
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
-                      "gravity, drag, time, solver, output, drape, colliders"),
+                      "gravity, drag, time, solver, output, drape, colliders, "
+                      "work_stealing"),
     ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
     ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
     ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
@@ -241,6 +242,9 @@ ERRORS = [
     ("solver", {"ksp_type": ["cg"]},
      "solver.ksp_type: ['cg'] — a string, a finite number or a boolean"),
     ("solver", {"mat_type": "dense"}, "solver.mat_type: 'dense' — one of baij | aij"),
+    ("work_stealing", {"enabled": "yes"}, "work_stealing.enabled: 'yes' — true or false"),
+    ("work_stealing", {"b": 0.5}, "work_stealing.b: 0.5 — a finite number >= 1"),
+    ("work_stealing", {"chunk": 0}, "work_stealing.chunk: 0 — an integer >= 1"),
 ]
 
 
@@ -283,7 +287,8 @@ TIME_ALLOWED = f"no such key; allowed under time: {TIME_KEYS}"
 OVERRIDE_ERRORS = [
     ("time.stepp=0.1", f"time.stepp: 0.1 — {TIME_ALLOWED}"),
     ("nosuch.key=1", "nosuch.key: 1 — no such key; allowed under the top level: scene, cloth, "
-                     "effects, gravity, drag, time, solver, output, drape, colliders"),
+                     "effects, gravity, drag, time, solver, output, drape, colliders, "
+                     "work_stealing"),
     ("cloth.2.name=x", "cloth.2.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.first.name=x", "cloth.first.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.0.pins.0.edge=top", "cloth.0.pins.0.edge: 'top' — cloth.0.pins is not in the "
@@ -313,7 +318,7 @@ def test_bad_overrides_name_their_path(scene_dir, override, expected):
 
 
 NOT_A_MAPPING = ("null — a YAML mapping with keys scene, cloth, effects, gravity, drag, time, "
-                 "solver, output, drape, colliders")
+                 "solver, output, drape, colliders, work_stealing")
 
 
 @pytest.mark.parametrize("text, expected", [
