@@ -218,16 +218,18 @@ def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, i
 
 # ------------------------------------------------------------------ 2. CCD impulses
 
-def collisions(x0, x1, tri, edges, vf_pairs, ee_pairs, eta):
+def collisions(x0, x1, tri, edges, vf_pairs, ee_pairs, eta, with_rows=False):
     """CCD hits (BFA02 §6, ccd.py) of clean candidate rows over x0 -> x1:
     stencils (ids (k, 4), coef (k, 4), normal (k, 3)) of the hitting pairs,
-    vertex-face hits first, each block in candidate (canonical) order."""
+    vertex-face hits first, each block in candidate (canonical) order;
+    ``with_rows``: also the indices of the hitting vf and ee rows."""
     r = vertex_face_ccd(x0, x1, tri, vf_pairs, eta)
     q = edge_edge_ccd(x0, x1, edges, ee_pairs, eta)
     a = np.isfinite(r.t)
     b = np.isfinite(q.t)
-    return _cat(_vf_stencil(tri, vf_pairs[a, 0], vf_pairs[a, 1], r.weights[a]) + (r.normal[a],),
-                _ee_stencil(edges, ee_pairs[b, 0], ee_pairs[b, 1], q.weights[b]) + (q.normal[b],))
+    out = _cat(_vf_stencil(tri, vf_pairs[a, 0], vf_pairs[a, 1], r.weights[a]) + (r.normal[a],),
+               _ee_stencil(edges, ee_pairs[b, 0], ee_pairs[b, 1], q.weights[b]) + (q.normal[b],))
+    return out + (np.flatnonzero(a), np.flatnonzero(b)) if with_rows else out
 
 
 def ccd_impulses(x0, u, h, inv_mass, tri, edges, vf_pairs, ee_pairs, thickness,

@@ -154,26 +154,26 @@ class DistributedCollisions:
 
     def shared_hits(self, x0, x1, tri, edges, vf, ee, eta):
         """Collective drop-in for ``impulses.collisions``: every rank runs the
-        CCD narrow phase on its contiguous block of the (replicated, canonical)
-        candidate rows and the hits are all-gathered in rank order, so every
-        rank gets the serial result, bitwise, for 1/P of the work (the narrow
-        phase was two thirds of a pile-up step when every rank ran it all)."""
+        CCD narrow phase on every P-th of the (replicated, canonical)
+        candidate rows (strided, so a crowded stretch of rows is shared, not
+        handed to one rank) and the hits are all-gathered with their row
+        numbers and put back in row order: every rank gets the serial
+        result, bitwise, for 1/P of the work (the narrow phase was two thirds
+        of a pile-up step when every rank ran it all)."""
         from ..collision.impulses import collisions
         p, r = self.comm.size, self.comm.rank
         if p == 1:
             return collisions(x0, x1, tri, edges, vf, ee, eta)
-        mine = lambda rows: rows[rows.shape[0] * r // p: rows.shape[0] * (r + 1) // p]
-        empty = np.zeros((0, 2), np.int64)
-        parts = []
-        for a, b in ((mine(vf), empty), (empty, mine(ee))):
-            ids, coef, nrm = collisions(x0, x1, tri, edges, a, b, eta)
-            # ids < 2^53 travel exactly as float64 beside the weights and normals
-            rows = np.hstack([ids.astype(np.float64), coef, nrm]) if ids.shape[0] else \
-                np.zeros((0, 11))
-            parts.append(self._allgather_float_rows(rows, 11))
-        allrows = np.vstack(parts)
-        return (allrows[:, :4].astype(np.int64), np.ascontiguousarray(allrows[:, 4:8]),
-                np.ascontiguousarray(allrows[:, 8:11]))
+        vf_mine, ee_mine = np.arange(r, vf.shape[0], p), np.arange(r, ee.shape[0], p)
+        ids, coef, nrm, vf_hit, ee_hit = collisions(x0, x1, tri, edges, vf[vf_mine], ee[ee_mine],
+                                                    eta, with_rows=True)
+        # the serial position (vf rows, then ee rows) and the ids: < 2^53, exact as float64
+        key = np.concatenate([vf_mine[vf_hit], vf.shape[0] + ee_mine[ee_hit]])
+        packed = np.hstack([key[:, None].astype(np.float64), ids.astype(np.float64), coef, nrm])
+        got = self._allgather_float_rows(packed, 12)
+        got = got[np.argsort(got[:, 0], kind="stable")]
+        return (got[:, 1:5].astype(np.int64), np.ascontiguousarray(got[:, 5:9]),
+                np.ascontiguousarray(got[:, 9:12]))
 
     def _allgather_float_rows(self, rows: np.ndarray, k: int) -> np.ndarray:
         rows = np.ascontiguousarray(rows, dtype=np.float64).reshape(-1, k)
