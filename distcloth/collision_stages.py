@@ -43,6 +43,7 @@ CANDIDATE_SLACK = 0.5    # the CCD passes of a step reuse their candidates while
 class CollisionStages:
     def __init__(self, sim, cfg, model, local):
         self.sim = sim
+        self.image_error_bounds = {}   # image-space collider name -> Eq. 14 (du, dv) in m
         self.colliders = []       # distance-field colliders: (query(x, t, maxd), friction, d_c, kind)
         self.mesh_colliders = []  # MeshCollider objects in the Bridson pipeline (method bvh)
         self.contacts = None
@@ -113,7 +114,8 @@ class CollisionStages:
             img = ImageSpaceCollider(mesh, resolution=tuple(spec.resolution),
                                      axis="xyz".index(spec.axis))
             self.colliders.append((img.query, spec.friction, spec.thickness, "image"))
-            self.image_error = getattr(img, "error_bound", None)
+            # seed 002 Eq. 14: the x-y error of the maps, reported with the run
+            self.image_error_bounds[spec.name] = [float(e) for e in img.error_bound]
             return
         from .collision.mesh_query import MeshProximity
         prox = MeshProximity(mesh)

@@ -88,8 +88,13 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
     h = cfg.time.step
     n_steps = max(1, int(round(cfg.time.end / h)))
     every = max(1, int(round(cfg.output.every / h)))
+    image = {f"image_error_bound/{name}": bound
+             for name, bound in sim.collisions.image_error_bounds.items()}
+    for name, (du, dv) in sim.collisions.image_error_bounds.items():
+        log(comm, f"image-space collider {name}: x-y error bound (seed 002 Eq. 14) "
+                  f"{1e3 * du:.2f} x {1e3 * dv:.2f} mm")
     writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
-                         {"steps": n_steps, "output_every_steps": every})
+                         {"steps": n_steps, "output_every_steps": every, **image})
     log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
     sim.pipeline.run("output", writer)
     sim.pipeline.take_step_counters()

@@ -195,7 +195,8 @@ def test_mesh_sphere_by_bvh_and_image_space(shared_tmp, comm, method):
     n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
     sagitta = R - np.min(np.abs(np.einsum("ij,ij->i", n / np.linalg.norm(n, axis=1)[:, None],
                                            c[:, 0])))
-    pixel = 0.0 if method == "bvh" else 0.5 * float(np.hypot(*sim.collisions.image_error))
+    pixel = 0.0 if method == "bvh" else \
+        0.5 * float(np.hypot(*sim.collisions.image_error_bounds["ball"]))
     contacts, worst = 0, np.inf
     for _ in range(120):
         diag = sim.step()
