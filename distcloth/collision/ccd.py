@@ -303,6 +303,23 @@ def ee_ccd(a0, b0, c0, d0, a1, b1, c1, d1, eta):
 
 
 @njit(cache=True)
+def _apart(x0, x1, p, q, r, u, v, w, eta):
+    """Whether the boxes of the swept vertices {p, q, r} and {u, v, w} (over
+    x0 -> x1) are more than eta apart along some axis: then the primitives
+    never come within eta during the step and the pair cannot hit (exact).
+    Candidates come from boxes padded by the thickness, so most resting
+    pairs of a pile-up end here, before any allocation or cubic."""
+    for k in range(3):
+        lo1 = min(x0[p, k], x1[p, k], x0[q, k], x1[q, k], x0[r, k], x1[r, k])
+        hi1 = max(x0[p, k], x1[p, k], x0[q, k], x1[q, k], x0[r, k], x1[r, k])
+        lo2 = min(x0[u, k], x1[u, k], x0[v, k], x1[v, k], x0[w, k], x1[w, k])
+        hi2 = max(x0[u, k], x1[u, k], x0[v, k], x1[v, k], x0[w, k], x1[w, k])
+        if lo1 > hi2 + eta or lo2 > hi1 + eta:
+            return True
+    return False
+
+
+@njit(cache=True)
 def _vf_batch(x0, x1, tri, pairs, eta, t, w, nrm):
     for k in range(pairs.shape[0]):
         v = pairs[k, 0]
@@ -310,6 +327,8 @@ def _vf_batch(x0, x1, tri, pairs, eta, t, w, nrm):
         i0 = tri[f, 0]; i1 = tri[f, 1]; i2 = tri[f, 2]
         t[k] = np.inf
         if v == i0 or v == i1 or v == i2:
+            continue
+        if _apart(x0, x1, v, v, v, i0, i1, i2, eta):
             continue
         r = vf_ccd(x0[v], x0[i0], x0[i1], x0[i2], x1[v], x1[i0], x1[i1], x1[i2], eta)
         t[k] = r[0]
@@ -325,6 +344,8 @@ def _ee_batch(x0, x1, edges, pairs, eta, t, st, nrm):
         a = edges[ea, 0]; b = edges[ea, 1]; c = edges[eb, 0]; d = edges[eb, 1]
         t[k] = np.inf
         if ea == eb or a == c or a == d or b == c or b == d:
+            continue
+        if _apart(x0, x1, a, b, b, c, d, d, eta):
             continue
         r = ee_ccd(x0[a], x0[b], x0[c], x0[d], x1[a], x1[b], x1[c], x1[d], eta)
         t[k] = r[0]
