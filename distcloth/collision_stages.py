@@ -17,13 +17,15 @@ Three sources of contact, each a stage only when the scene asks for it:
 * **After the solve** (stage ``collision:response``): Coulomb friction on the
   constrained vertices (Bridson et al. 2002: tangential change at most μ
   times the normal one) or, for image-space colliders, seed 002's Eq. 15
-  velocity response; then the Bridson pipeline for *triangle* contact (mesh
-  colliders with method bvh and, with self_collision, cloth against cloth):
+  velocity response; a position fail-safe against the distance fields (a
+  vertex still inside a closed body is moved out); then the Bridson pipeline
+  for *triangle* contact (mesh colliders with method bvh, plane colliders as
+  kinematic quads and, with self_collision, cloth against cloth), on the
+  motion that includes the fail-safe's projection:
   proximity repulsion, CCD impulses and rigid impact zones on one vertex
   space where collider vertices have infinite mass
   (distcloth/collision/impulses.py), on candidates the ranks find over the
-  replicated BVH (distcloth/parallel/collide.py); last, a position
-  fail-safe against the distance fields.
+  replicated BVH (distcloth/parallel/collide.py).
 
 Every rank computes the same contact for a shared vertex (ghosts included),
 the Bridson pipeline runs on the all-gathered cloth from the canonical,
@@ -67,6 +69,9 @@ class CollisionStages:
                 self._add_collider(spec)
         if self.mesh_colliders or self.self_collision:
             from .parallel.collide import build_collisions
+            if cfg.has("collisions"):
+                self.mesh_colliders += [_plane_quad(spec, model.rest_positions)
+                                        for spec in cfg.colliders if spec.shape == "plane"]
             ws = cfg.work_stealing
             self.detector = build_collisions(sim.comm, model, sim.layout, self.mesh_colliders,
                                              self.self_collision, stealing=ws.enabled, a=ws.a,
@@ -175,7 +180,7 @@ class CollisionStages:
     def response(self, result, h):
         """After the solve: friction (Coulomb, or Eq. 15 for image-space
         colliders) on the contacts, adhesive contacts marked for release, the
-        Bridson pipeline for triangle contact, the position fail-safe.
+        position fail-safe, the Bridson pipeline for triangle contact.
         Collective."""
         from .collision.response import friction, normal_impulse
         sim = self.sim
@@ -211,12 +216,17 @@ class CollisionStages:
                 v_new[idx] = vf
             sim.ghosts.update(released)
             self.pending_released = released[:, 0] > 0.5
-        if self.detector is not None:
-            x_new, v_new = self._triangle_contact(x_new, v_new, h, gain)
+        # the fail-safe before the triangle pipeline: its projection is then
+        # part of the motion the CCD checks, so lifting a layer out of a body
+        # cannot carry it through the layer above (it did, after the pipeline)
         pen, moved = -np.inf, 0
         if self.colliders:
             x_new, v_new, pen, moved = self._failsafe(x_new, v_new, h)
+        if self.detector is not None:
+            x_new, v_new = self._triangle_contact(x_new, v_new, h, gain)
         self.diag.update(contacts=count, max_penetration=pen, projected_vertices=moved)
+        if self.self_collision:
+            self.diag["self_intersections"] = float(self._count_crossings(x_new, sim.time + h))
         result.x, result.v = x_new, v_new
         return result
 
@@ -240,6 +250,8 @@ class CollisionStages:
         free = ~self._pinned
         inv_mass[:det.geometry.n_cloth][free] = 1.0 / self._mass[free]
         g = det.geometry
+        # one mu for the pipeline: the BVH mesh colliders' (plane quads leave
+        # their friction to the contact constraints' Coulomb step)
         mu = max([c[1] for c in self.colliders if c[3] == "mesh"] + [0.0])
         found = ReusedCandidates(det.candidates, self.thickness, CANDIDATE_SLACK * self.thickness)
         U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness, mu, found,
@@ -251,10 +263,15 @@ class CollisionStages:
         self.diag["impulse_hits"] = float(sum(stats.get("ccd_hits", [0])) if isinstance(
             stats.get("ccd_hits"), (list, tuple)) else stats.get("ccd_hits", 0))
         self.diag["impact_zone_vertices"] = float(stats.get("zone_vertices", 0))
-        if self.self_collision:
-            X = np.concatenate([X0[:g.n_cloth] + h * U2[:g.n_cloth]] + x1[1:])
-            self.diag["self_intersections"] = float(det.count_intersections(X))
         return x_new, v_new
+
+    def _count_crossings(self, x_new, t1) -> int:
+        """Cloth triangle pairs crossing at the end of the step (after the
+        fail-safe: what the step hands on).  Collective."""
+        det = self.detector
+        X = np.concatenate([det.gather(x_new[:self.sim.n_owned])]
+                           + [mesh.vertices(t1) for mesh in self.mesh_colliders])
+        return det.count_intersections(X)
 
     def _failsafe(self, x_new, v_new, h):
         """Distance-field colliders at the end of the step: vertices inside
@@ -341,3 +358,30 @@ class CollisionStages:
                     traverse_idle_mean=sm[1] / p, traverse_tests=sm[2], tasks_created=sm[3],
                     tasks_stolen=sm[4], steals_refused=sm[5], steal_messages=sm[6],
                     steal_latency_max=mx[2])
+
+
+def _plane_quad(spec, rest_positions):
+    """A plane collider as a kinematic two-triangle quad for the triangle
+    pipeline, far larger than the cloth (100 times its size plus 10 m), with
+    the plane's motion.  Bridson et al. 2002 push bodies through the same
+    impulses and impact zones as the cloth: a floor that only the contact
+    constraints and the position fail-safe knew about let the fail-safe lift
+    a layer of a pile through the layer above it (the ribbon of seed 000
+    Fig. 19 reached the floor with over a hundred crossings)."""
+    from .collision.colliders import MeshCollider, Plane, RigidMotion
+    plane = Plane(**dict(spec.geometry))
+    n = plane.normal
+    rest = np.asarray(rest_positions, dtype=np.float64)
+    center = rest.mean(axis=0)
+    size = float(np.ptp(rest, axis=0).max())
+    c = center - (center @ n - plane.offset) * n
+    a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    half = 100.0 * size + 10.0
+    corners = c + half * np.array([-a - b, a - b, a + b, -a + b])
+    motion = None
+    if spec.motion is not None:
+        motion = RigidMotion(spec.motion.times, spec.motion.translations, spec.motion.rotations)
+    return MeshCollider(corners[None], [[0, 1, 2], [0, 2, 3]], motion=motion,
+                        friction=spec.friction, thickness=spec.thickness)
