@@ -1,4 +1,5 @@
-"""Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``.
+"""Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``
+and ``distcloth study NAME [options]`` (distcloth/study/).
 
 Arguments with a single leading dash (``-distcloth_ksp_rtol 1e-8``,
 ``-log_view``) are PETSc options and go to PETSc untouched; the command
@@ -57,6 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "run":
             s.add_argument("--force", action="store_true",
                            help="run an explicit step above the stability limit anyway")
+    from .study import STUDIES, add_study_parsers
+    # the accuracy study registers beside stability (distcloth/study/accuracy.py)
+    STUDIES.setdefault("accuracy", ("the accuracy study (issue 6): sweep settings, errors against "
+                                    "a finer reference, CSV + report + plots",
+                                    "distcloth.study.accuracy"))
+    add_study_parsers(sub.add_parser("study", help="studies of the simulator (stability suite)",
+                                     allow_abbrev=False))
     return p
 
 
@@ -81,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args, comm, cmdline_options) -> int:
+    if args.command == "study":          # no scene: the study builds its own
+        from .study import run_study
+        return run_study(args, comm)
     from .config import ConfigError, format_config_error, load_config
     from .run import run
     cfg, message = None, None

@@ -1,0 +1,189 @@
+"""Error metrics of one result against a reference, in pure numpy.
+
+A "result" is the dict of ``distcloth.io.h5read.read_result`` (only the keys
+``time``, ``positions``, ``rest_positions``, ``triangles``, ``diagnostics``
+are used), so a test can build an exact reference by hand.
+
+Comparisons are made at common output times (seconds, not step counts) and
+at the reference's material points: a variant on another mesh is evaluated
+there by barycentric interpolation in the rest shape, which is exact for any
+field affine in the rest coordinates (rigid motion, uniform stretch).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# frames whose times differ by less than this (relative to the time scale) are
+# the same output time; steps are rounded from every/h, so only round-off separates them
+TIME_MATCH_RTOL = 1e-9
+
+
+def common_times(t_a: np.ndarray, t_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (ia, ib) of the frames of a and b at the same time, in time order."""
+    t_a, t_b = np.asarray(t_a, float), np.asarray(t_b, float)
+    if t_a.size == 0 or t_b.size == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    scale = max(float(np.max(np.abs(t_a))), float(np.max(np.abs(t_b))), 1e-300)
+    order = np.argsort(t_b, kind="stable")
+    pos = np.clip(np.searchsorted(t_b[order], t_a), 1, t_b.size - 1) if t_b.size > 1 \
+        else np.zeros(t_a.size, int)
+    # nearest of the two neighbours in the sorted b times
+    cand = np.stack([pos - 1, pos]) if t_b.size > 1 else np.stack([pos, pos])
+    dist = np.abs(t_b[order][cand] - t_a[None])
+    best = cand[np.argmin(dist, axis=0), np.arange(t_a.size)]
+    ok = np.abs(t_b[order][best] - t_a) <= TIME_MATCH_RTOL * scale
+    ia = np.flatnonzero(ok)
+    return ia, order[best[ok]]
+
+
+class RestInterpolator:
+    """Locate points in the rest shape of a triangle mesh: for each query point
+    the triangle containing it (its projection, for a curved rest shape) and
+    its barycentric coordinates there."""
+
+    def __init__(self, rest: np.ndarray, triangles: np.ndarray, candidates: int = 12):
+        from scipy.spatial import cKDTree
+        self.rest = np.asarray(rest, float)
+        self.tri = np.asarray(triangles, np.int64)
+        self.centroids = self.rest[self.tri].mean(axis=1)
+        self.tree = cKDTree(self.centroids)
+        self.k = min(candidates, len(self.tri))
+
+    def locate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(triangle per point (m,), barycentrics (m, 3), largest distance outside
+        its triangle in m: 0 when every point lies on the mesh)."""
+        p = np.asarray(points, float)
+        _, cand = self.tree.query(p, k=self.k)
+        cand = cand.reshape(len(p), self.k)                    # (m, k)
+        a, b, c = (self.rest[self.tri[cand, i]] for i in range(3))   # (m, k, 3)
+        e1, e2, d = b - a, c - a, p[:, None, :] - a
+        # barycentrics of the projection onto each candidate's plane (least squares)
+        d11 = np.einsum("mki,mki->mk", e1, e1)
+        d12 = np.einsum("mki,mki->mk", e1, e2)
+        d22 = np.einsum("mki,mki->mk", e2, e2)
+        r1 = np.einsum("mki,mki->mk", d, e1)
+        r2 = np.einsum("mki,mki->mk", d, e2)
+        det = d11 * d22 - d12 * d12
+        u = (d22 * r1 - d12 * r2) / det
+        v = (d11 * r2 - d12 * r1) / det
+        bary = np.stack([1 - u - v, u, v], axis=-1)             # (m, k, 3)
+        # clamp into the triangle (renormalised) and measure how far that moves the point
+        clamped = np.clip(bary, 0.0, None)
+        clamped /= clamped.sum(axis=-1, keepdims=True)
+        q = (clamped[..., 0:1] * a + clamped[..., 1:2] * b + clamped[..., 2:3] * c)
+        miss = np.linalg.norm(q - p[:, None, :], axis=-1)      # distance to the triangle
+        best = np.argmin(miss, axis=1)
+        rows = np.arange(len(p))
+        inside = np.all(bary[rows, best] >= -1e-12, axis=-1)
+        # inside points keep their exact barycentrics (exactness for affine fields)
+        w = np.where(inside[:, None], bary[rows, best], clamped[rows, best])
+        return cand[rows, best], w, float(np.max(miss[rows, best], initial=0.0))
+
+
+def interpolation(rest_from, tri_from, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertex indices (m, 3), weights (m, 3), worst miss in m) mapping a field on the
+    mesh (rest_from, tri_from) to ``points`` of its rest shape."""
+    loc = RestInterpolator(rest_from, tri_from)
+    t, w, miss = loc.locate(points)
+    return np.asarray(tri_from)[t], w, miss
+
+
+def apply_map(field: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """field (..., n, d) -> (..., m, d) at the located points."""
+    return np.einsum("...mjd,mj->...md", field[..., idx, :], w)
+
+
+def same_mesh(a: dict, b: dict) -> bool:
+    return (a["rest_positions"].shape == b["rest_positions"].shape
+            and np.array_equal(a["triangles"], b["triangles"])
+            and np.array_equal(a["rest_positions"], b["rest_positions"]))
+
+
+def lumped_weights(rest: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """A third of each adjacent triangle's rest area per vertex, summing to 1:
+    the weight of a material point in centre-of-mass and RMS averages."""
+    a, b, c = (rest[triangles[:, i]] for i in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    w = np.bincount(triangles.ravel(), weights=np.repeat(area / 3, 3), minlength=len(rest))
+    return w / w.sum()
+
+
+def rms(dx: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted RMS length of displacement errors (frames, m, 3) -> (frames,)."""
+    return np.sqrt(np.einsum("fm,m->f", np.einsum("fmi,fmi->fm", dx, dx), weights))
+
+
+def _diag_at(result: dict, name: str, times: np.ndarray) -> np.ndarray:
+    """A per-step diagnostic at frame times (linear in time; frame 0 takes the first step's
+    value, since diagnostics start after step 1)."""
+    d = result["diagnostics"]
+    if name not in d or len(d[name]) == 0:
+        return np.full(len(times), np.nan)
+    return np.interp(times, d["time"], d[name])
+
+
+def energy_drift(result: dict) -> float:
+    """Total energy at the end minus at the first step, J (from diagnostics/total_energy)."""
+    e = result["diagnostics"].get("total_energy")
+    if e is None or len(e) == 0:
+        return math.nan
+    return float(e[-1] - e[0])
+
+
+def nanmax(result: dict, name: str) -> float:
+    v = result["diagnostics"].get(name)
+    if v is None or len(v) == 0 or not np.any(np.isfinite(v)):
+        return math.nan
+    return float(np.nanmax(v))
+
+
+def time_to_divergence(times: np.ndarray, err: np.ndarray, threshold: float) -> float:
+    """First common time at which the error exceeds ``threshold``; inf if never."""
+    over = np.flatnonzero(np.asarray(err) > threshold)
+    return float(times[over[0]]) if over.size else math.inf
+
+
+def compare(result: dict, reference: dict, *, divergence_threshold: float = 0.01) -> dict:
+    """Every metric of ``result`` against ``reference``.
+
+    Returns scalars (``rms_mean``, ``rms_max``, ``final_error``, ``final_max_error``,
+    ``com_final_error``, ``com_max_error``, ``energy_drift``, ``energy_error_max``,
+    ``max_strain``, ``max_penetration``, ``time_to_divergence``, ``frames_compared``,
+    ``map_miss``) and series (``times``, ``rms``, ``com_error``)."""
+    ia, ib = common_times(result["time"], reference["time"])
+    if ia.size == 0:
+        raise ValueError("no common output times: choose output.every as a multiple of every step")
+    times = np.asarray(reference["time"])[ib]
+    x_ref = np.asarray(reference["positions"])[ib]
+    x = np.asarray(result["positions"])[ia]
+    miss = 0.0
+    if not same_mesh(result, reference):
+        idx, w, miss = interpolation(result["rest_positions"], result["triangles"],
+                                     reference["rest_positions"])
+        x = apply_map(x, idx, w)
+    weights = lumped_weights(reference["rest_positions"], reference["triangles"])
+    dx = x - x_ref
+    err = rms(dx, weights)
+    pointwise_final = np.linalg.norm(dx[-1], axis=1)
+    com_err = np.linalg.norm(np.einsum("fmi,m->fi", dx, weights), axis=1)
+    e_err = np.abs(_diag_at(result, "total_energy", times) - _diag_at(reference, "total_energy", times))
+    return {
+        "times": times, "rms": err, "com_error": com_err,
+        "frames_compared": int(ia.size), "t_final": float(times[-1]),
+        "rms_mean": float(np.sqrt(np.mean(err ** 2))), "rms_max": float(np.max(err)),
+        "final_error": float(err[-1]), "final_max_error": float(np.max(pointwise_final)),
+        "com_final_error": float(com_err[-1]), "com_max_error": float(np.max(com_err)),
+        "energy_drift": energy_drift(result),
+        "energy_error_max": float(np.nanmax(e_err)) if np.any(np.isfinite(e_err)) else math.nan,
+        "max_strain": nanmax(result, "max_strain"),
+        "max_penetration": nanmax(result, "max_penetration"),
+        "time_to_divergence": time_to_divergence(times, err, divergence_threshold),
+        "map_miss": miss,
+    }
+
+
+SCALAR_METRICS = ("rms_mean", "rms_max", "final_error", "final_max_error", "com_final_error",
+                  "com_max_error", "energy_drift", "energy_error_max", "max_strain",
+                  "max_penetration", "time_to_divergence", "frames_compared", "t_final", "map_miss")
