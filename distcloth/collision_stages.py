@@ -14,9 +14,11 @@ Three sources of contact, each a stage only when the scene asks for it:
   bouncing on a sphere or a plane at 5 ms steps, which impulses after an
   unconstrained solve gave).  A vertex the prediction missed triggers a
   re-solve with it as a contact.
-* **After the solve** (stage ``collision:response``): Coulomb friction on the
-  constrained vertices (Bridson et al. 2002: tangential change at most μ
-  times the normal one) or, for image-space colliders, seed 002's Eq. 15
+* **In the solve** (implicit schemes, stage ``force:friction``): Coulomb
+  friction as a regularised damping force (physics/contact_friction.py).
+* **After the solve** (stage ``collision:response``): for explicit schemes,
+  Coulomb friction on the constrained vertices (Bridson et al. 2002:
+  tangential change at most μ times the normal one) or, for image-space colliders, seed 002's Eq. 15
   velocity response; a position fail-safe against the distance fields (a
   vertex still inside a closed body is moved out); then the Bridson pipeline
   for *triangle* contact (mesh colliders with method bvh, plane colliders as
@@ -53,6 +55,8 @@ class CollisionStages:
         self.pending_released = None
         self.diag = {}
         self.detector = None
+        self.drive_end = 0.0      # s: the last collider keyframe / frame (work done until then)
+        self.friction_in_solve = False   # set by the simulation (implicit schemes)
         self.self_collision = cfg.has("self_collision")
         n_local = sim.n_local
         thick = np.zeros(model.num_vertices)
@@ -90,6 +94,19 @@ class CollisionStages:
             [c[2] for c in self.colliders] + [0.0])
 
     @property
+    def solve_friction(self) -> bool:
+        """Some distance-field collider (not image-space: seed 002 Eq. 15 acts
+        after the step) has friction, so an implicit solve can take it in."""
+        return any(c[1] > 0.0 and c[3] != "image" for c in self.colliders)
+
+    def solved_friction(self, contacts) -> np.ndarray | None:
+        """Mask of the contacts whose friction is a force of the solve."""
+        if contacts is None:
+            return None
+        kinds = np.array([c[3] != "image" for c in self.colliders] + [False], dtype=bool)
+        return kinds[contacts.collider] if contacts.collider.size else np.zeros(0, dtype=bool)
+
+    @property
     def has_bodies(self) -> bool:
         return bool(self.colliders)
 
@@ -98,11 +115,11 @@ class CollisionStages:
         return bool(self.colliders) or self.detector is not None
 
     def _add_collider(self, spec) -> None:
-        from .collision.colliders import (AnalyticCollider, Box, Capsule, Plane, RigidMotion,
-                                          Sphere, load_mesh_collider)
-        motion = None
-        if spec.motion is not None:
-            motion = RigidMotion(spec.motion.times, spec.motion.translations, spec.motion.rotations)
+        from .collision.colliders import (AnalyticCollider, Box, Capsule, Plane, Sphere,
+                                          load_mesh_collider)
+        motion = _motion(spec)
+        if motion is not None:
+            self.drive_end = max(self.drive_end, float(motion.times[-1]))
         if spec.shape != "mesh":
             shapes = {"plane": Plane, "sphere": Sphere, "capsule": Capsule, "box": Box}
             body = AnalyticCollider(shapes[spec.shape](**dict(spec.geometry)), motion,
@@ -114,6 +131,7 @@ class CollisionStages:
                                   friction=spec.friction, thickness=spec.thickness)
         if spec.scale != 1.0:
             mesh.frames *= spec.scale
+        self.drive_end = max(self.drive_end, float(mesh.frame_times[-1]))
         if spec.method == "image":
             from .collision.image_collider import ImageSpaceCollider
             img = ImageSpaceCollider(mesh, resolution=tuple(spec.resolution),
@@ -204,7 +222,8 @@ class CollisionStages:
                 image = np.array([self.colliders[j][3] == "image" for j in c.collider[mine]],
                                  dtype=bool)
                 vf = v_new[idx].copy()
-                if np.any(mu[~image] > 0):
+                # implicit schemes took it in the solve (physics/contact_friction.py)
+                if not self.friction_in_solve and np.any(mu[~image] > 0):
                     vf[~image] = friction(v_new[idx][~image], c.velocity[mine][~image],
                                           normal[~image], mu[~image], dvn[~image])
                 if image.any():      # seed 002 Eq. 15: C_fric keeps 1 - mu of the tangential velocity
@@ -360,6 +379,14 @@ class CollisionStages:
                     steal_latency_max=mx[2])
 
 
+def _motion(spec):
+    """The collider's keyframed rigid motion, or None."""
+    from .collision.colliders import RigidMotion
+    if spec.motion is None:
+        return None
+    return RigidMotion(spec.motion.times, spec.motion.translations, spec.motion.rotations)
+
+
 def _plane_quad(spec, rest_positions):
     """A plane collider as a kinematic two-triangle quad for the triangle
     pipeline, far larger than the cloth (100 times its size plus 10 m), with
@@ -368,20 +395,9 @@ def _plane_quad(spec, rest_positions):
     constraints and the position fail-safe knew about let the fail-safe lift
     a layer of a pile through the layer above it (the ribbon of seed 000
     Fig. 19 reached the floor with over a hundred crossings)."""
-    from .collision.colliders import MeshCollider, Plane, RigidMotion
-    plane = Plane(**dict(spec.geometry))
-    n = plane.normal
+    from .collision.colliders import MeshCollider, Plane
     rest = np.asarray(rest_positions, dtype=np.float64)
-    center = rest.mean(axis=0)
-    size = float(np.ptp(rest, axis=0).max())
-    c = center - (center @ n - plane.offset) * n
-    a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
-    a /= np.linalg.norm(a)
-    b = np.cross(n, a)
-    half = 100.0 * size + 10.0
-    corners = c + half * np.array([-a - b, a - b, a + b, -a + b])
-    motion = None
-    if spec.motion is not None:
-        motion = RigidMotion(spec.motion.times, spec.motion.translations, spec.motion.rotations)
-    return MeshCollider(corners[None], [[0, 1, 2], [0, 2, 3]], motion=motion,
+    corners, tris = Plane(**dict(spec.geometry)).quad(rest.mean(axis=0),
+                                                      100.0 * float(np.ptp(rest, axis=0).max()) + 10.0)
+    return MeshCollider(corners[None], tris, motion=_motion(spec),
                         friction=spec.friction, thickness=spec.thickness)

@@ -74,6 +74,21 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
                         attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names)
 
 
+def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
+    """Steps 1..n_steps: each step's diagnostics row, a frame every ``every`` steps
+    and after the last; raises SimulationError as ``sim.step`` does (collective)."""
+    for k in range(1, n_steps + 1):
+        diag = sim.step()
+        # the step's row first, so the frame's flush carries it; the output
+        # stage's time is charged to the following step's row
+        times, calls = sim.pipeline.take_step_counters()
+        writer.write_step(k, sim.time, diag, times, calls)
+        if k % every == 0 or k == n_steps:
+            sim.pipeline.run("output", writer)
+        if bar:
+            bar.update(k, sim.time)
+
+
 def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only=False,
         quiet=False, progress=True) -> int:
     t_start = time.perf_counter()
@@ -101,15 +116,7 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
     bar = Progress(comm, n_steps, enabled=progress and not quiet)
     status, code = "completed", 0
     try:
-        for k in range(1, n_steps + 1):
-            diag = sim.step()
-            # the step's row first, so the frame's flush carries it; the output
-            # stage's time is charged to the following step's row
-            times, calls = sim.pipeline.take_step_counters()
-            writer.write_step(k, sim.time, diag, times, calls)
-            if k % every == 0 or k == n_steps:
-                sim.pipeline.run("output", writer)
-            bar.update(k, sim.time)
+        write_steps(sim, writer, n_steps, every, bar)
     except SimulationError as exc:
         log(comm, f"stopped: {exc}")
         writer.record_error(exc.step, str(exc))

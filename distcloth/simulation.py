@@ -27,6 +27,7 @@ from .linalg.system import SolverFailure
 from .linalg.pattern import BlockPattern
 from .physics.terms import FORCE_STAGES, build_terms
 from .collision_stages import MAX_CONTACT_PASSES
+from .energy_guard import EnergyGuard, gravity_scale
 from .pipeline import Pipeline
 
 STAGES = ("kinematics", "collision:bodies", "constraints") + FORCE_STAGES + ("assembly", "solve", "update",
@@ -34,7 +35,7 @@ STAGES = ("kinematics", "collision:bodies", "constraints") + FORCE_STAGES + ("as
                                                         "collision:response")
 DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_energy",
                "total_energy", "max_strain", "max_speed", "newton_iterations",
-               "newton_residual", "ksp_iterations", "ksp_residual", "rejected_steps",
+               "newton_residual", "ksp_iterations", "ksp_residual", "rejected_steps", "newton_unconverged",
                "contacts", "max_penetration", "projected_vertices", "impulse_hits",
                "impact_zone_vertices", "self_intersections", "traverse_wall",
                "traverse_busy_max", "traverse_busy_mean", "traverse_idle_mean", "traverse_tests",
@@ -95,12 +96,20 @@ class Simulation:
         self._first_forces = None
         self.collisions = CollisionStages(self, cfg, model, local)
         self.terms = build_terms(cfg, model, lay)
+        self.integrator = make_integrator(cfg)
+        # implicit schemes take body-contact friction into the solve
+        # (physics/contact_friction.py); explicit ones keep it after the step
+        self.friction_term = None
+        if self.integrator.implicit and self.collisions.solve_friction:
+            from .physics.contact_friction import ContactFrictionTerm
+            self.friction_term = ContactFrictionTerm(self.mass, self.n_owned)
+            self.terms.append(self.friction_term)
+            self.collisions.friction_in_solve = True
         self.pattern = BlockPattern(self.n_owned, self.n_local,
                                     [s for t in self.terms for s in t.stencils()])
         for t in self.terms:
             t.bind(self.pattern)
         self.ghosts = GhostExchange(lay)
-        self.integrator = make_integrator(cfg)
         self.system = None
         if self.integrator.implicit:
             from .linalg.system import LinearSystem
@@ -112,6 +121,11 @@ class Simulation:
         # verdict on every rank (reduce what it checks).
         self.accept_hooks = []
         self.rejections = 0
+        self.newton_unconverged = 0
+        tc = cfg.time
+        self.energy_guard = EnergyGuard(tc.max_energy_gain if tc.energy_guard else None,
+                                        self.collisions.drive_end, gravity_scale(cfg, model))
+        self._energies_now = None   # (kinetic, gravitational, elastic) of the committed state
         self.time = 0.0
         self.step_index = 0
         self.h = cfg.time.step
@@ -144,7 +158,10 @@ class Simulation:
         return p
 
     def prepare(self) -> None:
-        """Collective checks before the first step: solver options, explicit stability."""
+        """Collective checks before the first step: solver options, explicit
+        stability; the energy guard's reference if the scene starts passive."""
+        if self.energy_guard.wants_reference(self.time):
+            self.energy_guard.set_reference(*self.energies())
         if self.system is not None:
             from .linalg.petsc import insert_scene_options, unused_options
             self._inserted_options = insert_scene_options(self.cfg.solver_options, self._cmdline)
@@ -312,18 +329,28 @@ class Simulation:
             self.x[0] = np.nan
         self.ghosts.update(self.x, self.v)
 
-    def _diagnostics(self, result) -> dict:
+    def energies(self) -> tuple[float, float, float]:
+        """(kinetic, gravitational, elastic) energy of the current state, summed
+        over ranks (collective). Elastic counts every term with a potential:
+        springs, FE membrane, hinges, shells; damping and drag have none."""
         n = self.n_owned
-        m = self.mass[:n]
-        kinetic = 0.5 * float(np.sum(m * np.einsum("ij,ij->i", self.v[:n], self.v[:n])))
+        kinetic = 0.5 * float(np.sum(self.mass[:n] * np.einsum("ij,ij->i", self.v[:n], self.v[:n])))
         grav = elastic = 0.0
         for t in self.terms:
             if t.name == "force:gravity":
                 grav += t.energy(self.x)
-            elif t.has_jacobian and hasattr(t, "k"):
+            else:
                 elastic += t.energy(self.x)
+        k, g, e = self.comm.sum(np.array([kinetic, grav, elastic]))
+        return float(k), float(g), float(e)
+
+    def _diagnostics(self, result) -> dict:
+        n = self.n_owned
+        # the health check already summed the committed state's energies
+        now, self._energies_now = self._energies_now, None
+        kinetic, grav, elastic = now if now is not None else self.energies()
         speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", self.v[:n], self.v[:n]), initial=0.0)))
-        sums = self.comm.sum(np.array([kinetic, grav, elastic]))
+        sums = (kinetic, grav, elastic)
         maxes = self.comm.max(np.array([self._max_strain(), speed]))
         return {
             "step_size": self.h,
@@ -332,7 +359,7 @@ class Simulation:
             "max_strain": maxes[0], "max_speed": maxes[1],
             "newton_iterations": result.newton_iterations, "newton_residual": result.newton_residual,
             "ksp_iterations": result.ksp_iterations, "ksp_residual": result.ksp_residual,
-            "rejected_steps": self.rejections,
+            "rejected_steps": self.rejections, "newton_unconverged": self.newton_unconverged,
             **self.collisions.diagnostics(),
         }
 
@@ -383,6 +410,8 @@ class Simulation:
         for _ in range(MAX_CONTACT_PASSES if col.has_bodies else 1):
             if col.has_bodies:
                 col.contacts = self.pipeline.run("collision:bodies", self.time, h, missed)
+                if self.friction_term is not None:
+                    self.friction_term.begin_step(col.contacts, h, col.solved_friction(col.contacts))
             cons = self.pipeline.run("constraints", target)
             error, solver_failure, result = None, False, None
             self._first_forces = None
@@ -412,6 +441,10 @@ class Simulation:
             agreed = self.comm.agree(error)
             if agreed is not None:
                 return None, agreed[1] + (f" (rank {agreed[0]})" if self.comm.size > 1 else ""), True
+        if not result.newton_converged and self.cfg.time.require_newton_convergence:
+            return None, (f"Newton did not converge in {result.newton_iterations} iterations "
+                          f"(relative residual {result.newton_residual:.3g} > "
+                          f"time.newton_tolerance = {self.cfg.time.newton_tolerance:g})"), False
         saved = (self.x.copy(), self.v.copy())
         self.pipeline.run("update", result)
         reason = self._check_state()
@@ -423,34 +456,41 @@ class Simulation:
         self.integrator.accepted()
         self.collisions.accepted()
         self.time += h
+        if not result.newton_converged:
+            if self.newton_unconverged == 0:
+                self.say(f"step {self.step_index}: Newton used all {result.newton_iterations} "
+                         f"iterations (residual {result.newton_residual:.3g} > "
+                         f"{self.cfg.time.newton_tolerance:g}); accepted, counted in "
+                         f"newton_unconverged (time.require_newton_convergence rejects)")
+            self.newton_unconverged += 1
+        if self.energy_guard.wants_reference(self.time):
+            self.energy_guard.set_reference(*self._energies_now)
         return result, None, False
 
     def _check_state(self) -> str | None:
-        """Collective health check of the tentative state (one reduction)."""
+        """Collective health check of the tentative state (two reductions):
+        NaN, speed limit, strain bound, energy guard.  Keeps the state's
+        energies for the diagnostics stage and the guard's reference."""
         n = self.n_owned
         finite = bool(np.all(np.isfinite(self.x[:n])) and np.all(np.isfinite(self.v[:n])))
         speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", self.v[:n], self.v[:n]), initial=0.0))) \
             if finite else 0.0
         strain = self._max_strain() if finite and self.cfg.time.max_strain is not None else 0.0
         bad, speed, strain = self.comm.max(np.array([0.0 if finite else 1.0, speed, strain]))
+        self._energies_now = None
         if bad:
             return "NaN or Inf in positions or velocities"
         if speed > MAX_SPEED:
             return f"blow-up: a vertex moves at {speed:.3g} m/s (limit {MAX_SPEED:g} m/s)"
         if self.cfg.time.max_strain is not None and strain > self.cfg.time.max_strain:
             return f"strain {strain:.3g} exceeds time.max_strain = {self.cfg.time.max_strain:g}"
-        return None
+        self._energies_now = self.energies()
+        return self.energy_guard.check(*self._energies_now)
 
     def _max_strain(self) -> float:
-        """Largest engineering strain of the structural springs (local, ghosts valid)."""
-        out = 0.0
-        for t in self.terms:
-            if t.name == "force:membrane" and hasattr(t, "strain_mask") and t.springs.size:
-                sp = t.springs[t.strain_mask]
-                d = self.x[sp[:, 0]] - self.x[sp[:, 1]]
-                st = (np.sqrt(np.einsum("ij,ij->i", d, d)) - t.rest[t.strain_mask]) / t.rest[t.strain_mask]
-                out = max(out, float(np.max(st, initial=0.0)))
-        return out
+        """Largest engineering membrane strain (local, ghosts valid): structural
+        springs, or the FE triangles' principal stretch - 1."""
+        return max((t.max_strain(self.x) for t in self.terms), default=0.0)
 
     def destroy(self):
         if self.system is not None:

@@ -100,7 +100,7 @@ def test_free_fall_errors_equal_the_analytic_error(dcomm, shared_tmp):
             if o.variant.role != "variant":
                 continue
             res = read_result(o.path)
-            m = metrics.compare(res, exact_free_fall(res["time"]))
+            m = metrics.compare(res, exact_free_fall(res["time"]), drape=False)
             rows.append((dict(o.variant.settings), m))
     rows = dcomm.bcast(rows)
     assert len(rows) == 8
@@ -168,3 +168,168 @@ def test_rerun_reproduces_errors_exactly(resumed, dcomm):
     assert repr(a) == repr(b)
     # and the errors are real numbers, not all zero (the comparison could not pass vacuously)
     assert all(row[0] > 0 for row in a[:2])
+
+
+# --- drape measures: shapes whose shadow is known --------------------------------
+
+def grid_square(n=21, side=1.0):
+    """A flat side x side square in the z = 0 plane, n x n vertices, two triangles per cell."""
+    u = np.linspace(-side / 2, side / 2, n)
+    X, Y = np.meshgrid(u, u)
+    rest = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    v = (j * n + i).ravel()
+    tri = np.vstack([np.column_stack([v, v + 1, v + n + 1]), np.column_stack([v, v + n + 1, v + n])])
+    return rest, tri
+
+
+def tilt(x, a):
+    """Rotate about the x axis by a (rad)."""
+    c, s = math.cos(a), math.sin(a)
+    return x @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).T
+
+
+def test_shadow_area_of_flat_tilted_and_folded_squares():
+    rest, tri = grid_square()
+    cell = 1.0 / metrics.SHADOW_CELLS
+    # the raster counts whole cells along the outline: at most half a cell per side
+    tol = 2 * cell
+    assert metrics.shadow_area(rest, tri, cell) == pytest.approx(1.0, abs=tol)
+    for a in (0.3, 0.7, 1.2):
+        assert metrics.shadow_area(tilt(rest, a), tri, cell) == pytest.approx(math.cos(a), abs=tol)
+    # a square turned in its plane keeps its area (outline slanted across the cells)
+    c, s = math.cos(0.4), math.sin(0.4)
+    turned = rest @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T
+    assert metrics.shadow_area(turned, tri, cell) == pytest.approx(1.0, abs=tol)
+    # folded in half along y = 0 (the upper half laid 1 cm above the lower): half its area,
+    # not the convex hull's; and projected along another "up", the same as rotating the cloth
+    folded = rest.copy()
+    top = folded[:, 1] > 0
+    folded[top, 1] *= -1
+    folded[top, 2] = 0.01
+    assert metrics.shadow_area(folded, tri, cell) == pytest.approx(0.5, abs=tol)
+    assert metrics.shadow_area(rest[:, [2, 0, 1]], tri, cell, up=(1, 0, 0)) == pytest.approx(1.0, abs=tol)
+    # vertical: no shadow
+    assert metrics.shadow_area(tilt(rest, math.pi / 2), tri, cell) == pytest.approx(0.0, abs=tol)
+
+
+def test_drape_measures_and_their_differences():
+    rest, tri = grid_square()
+    a = 0.5
+    frames = np.stack([rest + [0, 0, 0.3], tilt(rest, a) + [0, 0, 0.3]])
+    disc = math.pi * 0.25 ** 2
+    d = metrics.drape_measures(frames, rest, tri, support_area=disc)
+    np.testing.assert_allclose(d["shadow_area"], [1.0, math.cos(a)], atol=0.005)
+    # Cusick: (A_shadow - A_disc) / (A_cloth - A_disc); flat cloth -> 1
+    np.testing.assert_allclose(d["drape_coefficient"], (d["shadow_area"] - disc) / (1.0 - disc), rtol=1e-12)
+    np.testing.assert_allclose(d["com_height"], [0.3, 0.3], atol=1e-12)   # tilted about its centre
+    np.testing.assert_allclose(d["vertical_extent"], [0.0, math.sin(a)], atol=1e-12)
+    no_disc = metrics.drape_measures(frames, rest, tri)
+    np.testing.assert_allclose(no_disc["drape_coefficient"], no_disc["shadow_area"], rtol=1e-12)
+    diff = metrics.compare_drape(d, {m: v[[0, 0]] for m, v in d.items()})
+    assert diff["vertical_extent_final_diff"] == pytest.approx(math.sin(a))
+    assert diff["shadow_area_max_diff"] == pytest.approx(1.0 - d["shadow_area"][1])
+    assert diff["com_height_max_diff"] == pytest.approx(0.0, abs=1e-12)
+    assert metrics.support_disc_area({"colliders": [{"shape": "sphere", "radius": 0.25},
+                                                    {"shape": "plane"}]}) == pytest.approx(disc)
+    assert metrics.support_disc_area({"colliders": [{"shape": "plane"}]}) == 0.0
+
+
+# --- chaos: the noise floor's divergence decides --------------------------------
+
+def test_chaos_follows_the_noise_floor():
+    from distcloth.study import accuracy_report as rep
+    calm = rep.chaos({"time_to_divergence": math.inf, "rms_max": 1e-7}, 0.01)
+    assert not calm["chaotic"] and rep.ranking_metric(calm["chaotic"]) == "rms_mean"
+    assert "not chaotic" in rep.chaos_sentences(calm)[0]
+    wild = rep.chaos({"time_to_divergence": 0.6, "rms_max": 0.05}, 0.01)
+    assert wild["chaotic"] and wild["auto"] and rep.ranking_metric(True) == "com_max_error"
+    text = rep.chaos_sentences(wild)[0]
+    assert "t = 0.6 s" in text and "predictability horizon" in text and "chosen automatically" in text
+    told = rep.chaos({"time_to_divergence": math.inf, "rms_max": 1e-7}, 0.01, forced=True)
+    assert told["chaotic"] and not told["auto"]
+
+
+# --- axes: --alone around the base scene, the pc shorthand ----------------------
+
+def test_alone_axes_compare_with_the_base_scene():
+    raw = square_scene(resolution=9)
+    plan = sweep.plan(raw, sweep.parse_vary(["time.step=0.02,0.01"]),
+                      alone=sweep.parse_vary(["pc=jacobi", "resolution=5"]))
+    roles = [(v.role, v.label(), v.base, v.alone) for v in plan]
+    assert roles[:2] == [("variant", "time.step=0.02", True, False), ("variant", "time.step=0.01", False, False)]
+    assert roles[2:4] == [("variant", "pc=jacobi", False, True), ("variant", "resolution=5", False, True)]
+    ref = plan[4]
+    # the base scene's own mesh (9 x 9) is finer than the --alone one, so the reference keeps it
+    assert ref.role == "reference" and "time.step=0.0025" in ref.overrides
+    assert not any("resolution" in o for o in ref.overrides)
+    # no product variant is the base scene: it is added
+    plan = sweep.plan(raw, {}, alone=sweep.parse_vary(["pc=jacobi"]))
+    assert [v.label() for v in plan] == ["base scene", "pc=jacobi", "reference", "noise"]
+
+
+def test_every_pc_value_maps_to_solver_options_that_run(dcomm, shared_tmp):
+    """Each pc shorthand sets its PETSc options, and PETSc accepts them: one step each."""
+    raw = square_scene(effects=("gravity", "membrane", "bending"), end=0.02, every=0.02)
+    for pc, opts in sweep.PC_PRESETS.items():
+        assert set(sweep.expand(sweep.normalise_scene(raw), "pc", pc)) == {f"{k}={v}" for k, v in opts.items()}
+    with pytest.raises(ValueError, match="pc=ilu"):
+        sweep.expand(raw, "pc", "ilu")
+    variants = sweep.plan(raw, {}, alone={"pc": list(sweep.PC_PRESETS)}, noise_floor=False)
+    out = sweep.run_sweep(variants, raw, ".", "test.yaml", dcomm, str(shared_tmp / "pc"))
+    assert [o.status for o in out] == ["completed"] * (len(sweep.PC_PRESETS) + 2)
+    solvers = None
+    if dcomm.rank == 0:
+        from distcloth.io.h5read import read_attrs
+        solvers = {o.variant.label(): read_attrs(o.path)["solver"] for o in out}
+    solvers = dcomm.bcast(solvers)
+    for pc in ("jacobi", "gamg", "hypre"):
+        assert pc in solvers[f"pc={pc}"]
+
+
+# --- the command: CSV + Markdown + plots, and a rerun that resumes -------------
+
+SCENE_YAML = """\
+scene: tiny
+cloth:
+  - name: sq
+    mesh: {grid: {size: [0.5, 0.5], resolution: [5, 5]}, center: [0, 0, 1]}
+    pins: [{edge: top}]
+    material: {density: 0.1, stretch: 10.0, shear: 1.0, bending: 1.0e-6}
+effects: [gravity, membrane, bending]
+time: {end: 0.08, step: 0.02, integrator: backward_euler}
+output: {file: unused.h5, every: 0.04, preview: false}
+"""
+
+
+@pytest.mark.rank0_only
+def test_command_writes_csv_report_plots_and_resumes(tmp_path):
+    import csv
+    from conftest import run_cli
+    scene = tmp_path / "tiny.yaml"
+    scene.write_text(SCENE_YAML)
+    study = tmp_path / "study"
+    args = ["study", "accuracy", str(scene), "--vary", "time.step=0.02,0.01",
+            "--alone", "pc=jacobi", "--dir", str(study)]
+    p = run_cli(args, ranks=2)
+    assert p.returncode == 0, p.stderr
+    assert "[accuracy] [1/5] variant time.step=0.02: running" in p.stderr
+    with open(study / "accuracy.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["role"] for r in rows] == ["variant"] * 3 + ["reference", "noise"]
+    assert all(r["status"] == "completed" for r in rows)
+    assert float(rows[0]["rms_mean"]) > float(rows[1]["rms_mean"]) > 0     # a finer step is closer
+    assert rows[0]["shadow_area_final_diff"] != ""
+    text = (study / "accuracy.md").read_text()
+    assert "## Findings" in text and "pc=jacobi instead of the base scene" in text
+    assert "not chaotic" in text
+    pngs = ["error_vs_wall.png", "error_vs_time.png", "stage_split.png", "drape.png"]
+    assert all((study / n).stat().st_size > 1000 for n in pngs)
+    before = {h5.name: h5.stat().st_mtime_ns for h5 in study.glob("*.h5")}
+    assert len(before) == 5
+    again = run_cli(args, ranks=2)
+    assert again.returncode == 0, again.stderr
+    assert again.stderr.count("not rerun") == 5 and "running" not in again.stderr
+    assert {h5.name: h5.stat().st_mtime_ns for h5 in study.glob("*.h5")} == before
+    with open(study / "accuracy.csv", newline="") as f:
+        assert [r["rms_mean"] for r in csv.DictReader(f)] == [r["rms_mean"] for r in rows]

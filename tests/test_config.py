@@ -154,7 +154,8 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
 
 THE_EFFECTS = "one of gravity | membrane | bending | damping | drag | collisions | self_collision"
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
-             "newmark_gamma, adaptive, max_halvings, max_strain")
+             "newmark_gamma, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
+             "require_newton_convergence")
 
 # (key path set on base_scene(), value, the expected line after 'config error: ')
 ERRORS = [
@@ -179,6 +180,13 @@ ERRORS = [
      "cloth.0.material.bending_model: 'flexion' — dihedral, isometric, dihedral_shell or isometric_shell with model: fem"),
     ("cloth.0.material", {"stretch": True},
      "cloth.0.material.stretch: true — a finite number > 0"),
+    ("solver", {"pc_type": "gamg"}, "solver.pc_type: 'gamg' — gamg with solver.mat_type: aij "
+                                     "(PETSc's GAMG cannot build its graph from the default BAIJ "
+                                     "matrix)"),
+    ("time", {"max_energy_gain": 0}, "time.max_energy_gain: 0 — a finite number > 0"),
+    ("time", {"energy_guard": "yes"}, "time.energy_guard: 'yes' — true or false"),
+    ("time", {"require_newton_convergence": 1},
+     "time.require_newton_convergence: 1 — true or false"),
     ("effects", ["gravity", "wind"], f"effects.1: 'wind' — {THE_EFFECTS}"),
     ("effects", ["drag", "drag"], "effects.1: 'drag' — each effect at most once"),
     ("effects", "gravity", "effects: 'gravity' — a list of effect names: gravity, membrane, "

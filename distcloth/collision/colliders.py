@@ -211,6 +211,19 @@ class Plane:
         y = _points(points)
         return y @ self.normal - self.offset, np.broadcast_to(self.normal, y.shape).copy()
 
+    def quad(self, near, half: float) -> tuple[np.ndarray, np.ndarray]:
+        """A square of the plane centred at the projection of ``near``, of
+        half-width ``half``: corners (4, 3) and two triangles (2, 3), facing
+        along the normal (a plane as a mesh for the triangle pipeline)."""
+        n = self.normal
+        near = np.asarray(near, dtype=np.float64).reshape(3)
+        c = near - (near @ n - self.offset) * n
+        a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        a /= np.linalg.norm(a)
+        b = np.cross(n, a)
+        corners = c + half * np.array([-a - b, a - b, a + b, -a + b])
+        return corners, np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
+
 
 class Sphere:
     def __init__(self, center=(0.0, 0.0, 0.0), radius: float = 1.0):

@@ -40,8 +40,10 @@ friction.  On an inclined plane this gives exactly
 change through the integrator's own dx1/dv1 (h for backward Euler, h/2 for
 implicit midpoint, 2h/3 for BDF2, h beta/gamma for Newmark, h for the
 explicit schemes), so ``x_new = x_old + h v_new`` stays true for backward
-Euler.  Friction stays outside the solve because the Coulomb cone is not a
-linear constraint; one step of lag in the normal impulse is the price.
+Euler.  Implicit schemes no longer use this clamp: they take friction into
+the solve (distcloth/physics/contact_friction.py), because a vertex held
+back after the solve stretches the cloth its neighbours moved; explicit
+schemes still do.
 
 **Position fail-safe.**  After the response, any vertex still at phi < d
 (curvature, a missed contact, a vertex released as adhesive) is moved

@@ -59,7 +59,8 @@ COLLIDER_KEYS = {**_leaves("name", "shape", "normal", "offset", "center", "radiu
                            "scale", "method", "resolution", "axis"), "motion": MOTION_KEYS}
 MESH_COLLIDER_KEYS = ("file", "frame_rate", "scale", "method", "resolution", "axis")
 TIME_KEYS = _leaves("end", "step", "integrator", "newton_iterations", "newton_tolerance",
-                    "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain")
+                    "newmark_beta", "newmark_gamma", "adaptive", "max_halvings", "max_strain",
+                    "energy_guard", "max_energy_gain", "require_newton_convergence")
 OUTPUT_KEYS = _leaves("file", "every", "preview")
 DRAPE_KEYS = _leaves("method", "stop_on", "tolerance", "max_iterations", "frame_every")
 STEAL_KEYS = _leaves("enabled", "a", "b", "chunk")
@@ -501,6 +502,11 @@ def _read_time(value: Any, key: str) -> TimeSpec:
         max_halvings=_optional(section, key, "max_halvings", d.max_halvings, read_int,
                                at_least=1, at_most=30),
         max_strain=_optional(section, key, "max_strain", d.max_strain, read_float, above=0),
+        energy_guard=_optional(section, key, "energy_guard", d.energy_guard, read_bool),
+        max_energy_gain=_optional(section, key, "max_energy_gain", d.max_energy_gain, read_float,
+                                  above=0),
+        require_newton_convergence=_optional(section, key, "require_newton_convergence",
+                                             d.require_newton_convergence, read_bool),
     )
 
 
@@ -528,6 +534,9 @@ def _read_solver(value: Any, key: str) -> tuple[tuple[tuple[str, Any], ...], str
             rebuild = read_int(entry, option_key, at_least=1)
         else:
             options[name] = _read_option_value(entry, option_key)
+    if options.get("pc_type") == "gamg" and mat_type == "baij":
+        raise ConfigError(join(key, "pc_type"), "gamg", "gamg with solver.mat_type: aij (PETSc's "
+                          "GAMG cannot build its graph from the default BAIJ matrix)")
     return tuple(options.items()), mat_type, warm_start, rebuild
 
 

@@ -169,7 +169,10 @@ class TimeSpec:
     newmark_gamma: float = 0.5
     adaptive: bool = False        # halve h and retry a rejected step
     max_halvings: int = 6
-    max_strain: float | None = None   # reject a step whose largest structural strain exceeds it
+    max_strain: float | None = None   # reject a step whose largest membrane strain (stretch - 1) exceeds it
+    energy_guard: bool = True         # reject a step that gains energy in a passive scene (energy_guard.py)
+    max_energy_gain: float = 0.1      # ... beyond E_ref + this * S
+    require_newton_convergence: bool = False   # reject a step whose Newton loop ran out of iterations
 
 
 @dataclass(frozen=True)

@@ -59,9 +59,10 @@ class ImplicitScheme(Integrator):
         dv_owned, info = sim.solve(data, b, cons)
         ksp_its, ksp_res = info.iterations, info.residual
         dv = sim.local_array(dv_owned)
-        newton_its, rel = 1, 0.0
+        newton_its, rel, converged = 1, 0.0, True
         max_its = self.cfg.time.newton_iterations
         if max_its > 1:
+            converged = False
             b0 = max(sim.global_norm(b), 1e-300)
             relaxed = Constraints(cons.index, cons.S, np.zeros_like(cons.z))
             while newton_its < max_its:
@@ -69,6 +70,7 @@ class ImplicitScheme(Integrator):
                 g = m * (dv[:n] - aff.d) - aff.s * f[:n]
                 rel = sim.global_norm(sim.project(relaxed, -g)) / b0
                 if rel <= self.cfg.time.newton_tolerance:
+                    converged = True
                     break
                 data = sim.assemble(alpha=alpha, beta=beta)
                 delta, info = sim.solve(data, -g, relaxed)
@@ -80,7 +82,7 @@ class ImplicitScheme(Integrator):
         self.position_gain = aff.a_x      # dx1/dv1, for a post-solve velocity change
         x1, v1 = self.final(sim, h, aff, dv)
         return StepResult(x=x1, v=v1, newton_iterations=newton_its, ksp_iterations=ksp_its,
-                          ksp_residual=ksp_res, newton_residual=rel)
+                          ksp_residual=ksp_res, newton_residual=rel, newton_converged=converged)
 
 
 class BackwardEuler(ImplicitScheme):

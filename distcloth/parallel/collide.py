@@ -97,14 +97,16 @@ class DistributedCollisions:
         out[self._order] = flat.reshape(-1, k)
         return out
 
-    def _allgather_rows(self, rows: np.ndarray) -> np.ndarray:
-        rows = np.ascontiguousarray(rows, dtype=np.int64).reshape(-1, rows.shape[1])
-        k = rows.shape[1]
+    def _allgather_rows(self, rows: np.ndarray, k: int | None = None,
+                        dtype=np.int64) -> np.ndarray:
+        """Every rank's rows (k columns of ``dtype``), concatenated in rank order."""
+        k = rows.shape[1] if k is None else k
+        rows = np.ascontiguousarray(rows, dtype=dtype).reshape(-1, k)
         counts = np.array(self.mpi.allgather(rows.shape[0]), dtype=np.int64)
         displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        flat = np.empty(int(counts.sum()) * k, dtype=np.int64)
+        flat = np.empty(int(counts.sum()) * k, dtype=dtype)
         self.mpi.Allgatherv(rows.reshape(-1), [flat, counts * k, displs * k,
-                                               _mpi_type(self.comm, np.int64)])
+                                               _mpi_type(self.comm, dtype)])
         return flat.reshape(-1, k)
 
     # ----------------------------------------------------------- detection
@@ -170,19 +172,10 @@ class DistributedCollisions:
         # the serial position (vf rows, then ee rows) and the ids: < 2^53, exact as float64
         key = np.concatenate([vf_mine[vf_hit], vf.shape[0] + ee_mine[ee_hit]])
         packed = np.hstack([key[:, None].astype(np.float64), ids.astype(np.float64), coef, nrm])
-        got = self._allgather_float_rows(packed, 12)
+        got = self._allgather_rows(packed, 12, np.float64)
         got = got[np.argsort(got[:, 0], kind="stable")]
         return (got[:, 1:5].astype(np.int64), np.ascontiguousarray(got[:, 5:9]),
                 np.ascontiguousarray(got[:, 9:12]))
-
-    def _allgather_float_rows(self, rows: np.ndarray, k: int) -> np.ndarray:
-        rows = np.ascontiguousarray(rows, dtype=np.float64).reshape(-1, k)
-        counts = np.array(self.mpi.allgather(rows.shape[0]), dtype=np.int64)
-        displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        flat = np.empty(int(counts.sum()) * k)
-        self.mpi.Allgatherv(rows.reshape(-1), [flat, counts * k, displs * k,
-                                               _mpi_type(self.comm, np.float64)])
-        return flat.reshape(-1, k)
 
     def proximity_pairs(self, x, thickness: float):
         """Collective: every vertex-face and edge-edge pair closer than

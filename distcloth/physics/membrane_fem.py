@@ -73,6 +73,8 @@ a piecewise-constant second derivative, so the Hessian stays exact.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -589,6 +591,19 @@ class MembraneFEMTerm(ForceTerm):
     def energy(self, x):
         scratch = np.zeros((np.asarray(x).shape[0], 3))
         return float(self._run(x, scratch, False)[0])
+
+    def max_strain(self, x):
+        """Largest principal engineering strain (stretch - 1) over the triangles.
+        The kernel reports the model's own measure: Green's E for stvk (and
+        tables), whose principal stretch is sqrt(1 + 2 E); Biot's S - I for
+        corotated, already stretch - 1."""
+        if not self.tris.shape[0]:
+            return 0.0
+        scratch = np.zeros((np.asarray(x).shape[0], 3))
+        e = float(self._run(x, scratch, False)[1])
+        if self.model != COROTATED:
+            e = math.sqrt(max(1.0 + 2.0 * e, 0.0)) - 1.0
+        return max(e, 0.0)
 
     def element_hessians(self):
         return element_hessians(self.hr)

@@ -12,7 +12,10 @@ communicator.  Its contract:
 * ``stiffness_product(w, out)``: out += (df/dx) w at the last evaluation;
 * ``add_to_system(data, alpha, beta)``: add its part of
   A = M - beta df/dv - alpha df/dx to the block values;
-* ``energy(x)``: its potential energy only (diagnostics).
+* ``energy(x)``: its potential energy only (diagnostics; 0 for dissipative
+  terms);
+* ``max_strain(x)``: its largest engineering strain (stretch - 1) at x, 0 for
+  terms that do not stretch the membrane (diagnostics and ``time.max_strain``).
 
 Adding an effect means adding a term here and naming it in ``build_terms``.
 """
@@ -44,6 +47,9 @@ class ForceTerm:
         pass
 
     def energy(self, x):
+        return 0.0
+
+    def max_strain(self, x):
         return 0.0
 
 
@@ -91,6 +97,14 @@ class SpringTerm(_SpringSet):
 
     def energy(self, x):
         return sk.spring_energy_only(x, self.springs, self.rest, self.k, self.weight)
+
+    def max_strain(self, x):
+        """Largest engineering strain of the structural springs (strain_mask)."""
+        if not self.strain_mask.any():
+            return 0.0
+        sp, rest = self.springs[self.strain_mask], self.rest[self.strain_mask]
+        d = x[sp[:, 0]] - x[sp[:, 1]]
+        return float(np.max((np.sqrt(np.einsum("ij,ij->i", d, d)) - rest) / rest, initial=0.0))
 
 
 class SpringDampingTerm(_SpringSet):
@@ -191,7 +205,9 @@ def build_terms(cfg, model, layout):
     return terms
 
 
-FORCE_STAGES = ("force:gravity", "force:membrane", "force:bending", "force:damping", "force:drag")
+# friction last: its coefficients are set from every other force at the start state
+FORCE_STAGES = ("force:gravity", "force:membrane", "force:bending", "force:damping", "force:drag",
+                "force:friction")
 
 
 def local_elements(elements: np.ndarray, layout):

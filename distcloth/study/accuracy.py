@@ -20,7 +20,7 @@ import sys
 import numpy as np
 
 from . import sweep
-from .metrics import compare
+from .metrics import compare, nanmax, reference_drape, support_disc_area
 
 HELP = ("the accuracy study (issue 6): sweep settings, errors against a finer reference, "
         "wall time and stage split, CSV + Markdown + plots")
@@ -38,12 +38,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "Newton 1e-10, ksp_rtol 1e-10 unpreconditioned, finest resolution)")
     p.add_argument("--one-at-a-time", action="store_true",
                    help="vary each axis alone around the base scene instead of the full product")
+    p.add_argument("--alone", action="append", default=[], metavar="KEY=V1,V2",
+                   help="an axis varied by itself around the base scene, beside the --vary product "
+                        "(e.g. pc=gamg,hypre); compared with the variant that is the base scene")
     p.add_argument("--every", type=float, default=None,
                    help="seconds between compared frames (default: the scene's output.every)")
     p.add_argument("--dir", default=None,
                    help="study directory: results, CSV, report, plots (default out/accuracy/SCENE)")
     p.add_argument("--chaotic", action="store_true",
-                   help="rank by centre-of-mass error and time to divergence, not positions")
+                   help="rank by centre-of-mass error, energies and drape measures, not positions "
+                        "(chosen automatically when the noise floor diverges within the run)")
     p.add_argument("--divergence", type=float, default=0.01, metavar="METRES",
                    help="RMS error that counts as diverged (default 0.01 m)")
     p.add_argument("--no-noise-floor", action="store_true", help="skip the perturbed reference rerun")
@@ -65,27 +69,50 @@ def stage_seconds(result: dict) -> dict:
     return {k: float(np.nansum(v)) for k, v in result["stage_time"].items()}
 
 
-def analyse(outcomes, *, divergence=0.01):
+def _run_row(o) -> dict:
+    """What a variant's outcome says before any comparison."""
+    return {"name": o.variant.name, "role": o.variant.role, "status": o.status,
+            "label": o.variant.label(), "settings": dict(o.variant.settings), "wall": o.wall,
+            "stages": {}, "message": o.message, "perturb": o.variant.perturb,
+            "base": o.variant.base, "alone": o.variant.alone}
+
+
+def _solver_counts(row: dict, res: dict) -> None:
+    """Stage seconds, mean KSP iterations, steps whose Newton loop ran out of iterations."""
+    row["stages"] = stage_seconds(res)
+    diag = res["diagnostics"]
+    ksp = diag.get("ksp_iterations")
+    row["ksp_iterations_mean"] = float(np.nanmean(ksp)) if ksp is not None and len(ksp) else math.nan
+    row["steps"] = int(len(diag.get("step", ())))
+    unconverged = nanmax(res, "newton_unconverged")           # a running count
+    row["newton_unconverged"] = 0 if math.isnan(unconverged) else int(unconverged)
+    row["newton_residual_max"] = nanmax(res, "newton_residual")
+
+
+def analyse(outcomes, *, divergence=0.01, support_area=0.0):
     """Rows (variants, then the reference and noise rerun) with their metrics
-    against the reference; rank 0 only (reads the files serially)."""
+    against the reference; rank 0 only (reads the files serially).  The
+    reference's row carries its own drape measures over time (``times``, ``drape``)."""
     from ..io.h5read import read_result
     ref_o = next(o for o in outcomes if o.variant.role == "reference")
     if ref_o.status != "completed":
         raise RuntimeError(f"the reference did not complete ({ref_o.status}: {ref_o.message})")
     reference = read_result(ref_o.path)
+    ref_drape = reference_drape(reference, support_area)
     rows, noise = [], None
     for o in outcomes:
-        row = {"name": o.variant.name, "role": o.variant.role, "status": o.status,
-               "label": o.variant.label(), "settings": dict(o.variant.settings), "wall": o.wall,
-               "stages": {}, "message": o.message, "perturb": o.variant.perturb}
+        row = _run_row(o)
         if o.status in ("completed", "failed") and os.path.exists(o.path):
             res = read_result(o.path)
-            row["stages"] = stage_seconds(res)
-            ksp = res["diagnostics"].get("ksp_iterations")
-            row["ksp_iterations_mean"] = float(np.nanmean(ksp)) if ksp is not None and len(ksp) else math.nan
-            if o.variant.role != "reference":
+            _solver_counts(row, res)
+            if o.status == "failed":       # the file's cause: the same whether run now or resumed
+                row["message"] = str(res["attrs"].get("error", "") or row["message"])
+            if o.variant.role == "reference":
+                row.update(times=np.asarray(reference["time"]), drape=ref_drape)
+            else:
                 try:
-                    row.update(compare(res, reference, divergence_threshold=divergence))
+                    row.update(compare(res, reference, divergence_threshold=divergence,
+                                       support_area=support_area, ref_drape=ref_drape))
                 except ValueError as exc:
                     row["message"] = (row["message"] + "; " if row["message"] else "") + str(exc)
         if o.variant.role == "noise":
@@ -108,9 +135,10 @@ def main(args, comm=None) -> int:
     try:
         raw = load_scene(args.scene)
         axes = sweep.parse_vary(args.vary)
+        alone = sweep.parse_vary(args.alone)
         variants = sweep.plan(raw, axes, args.overrides, one_at_a_time=args.one_at_a_time,
                               reference_overrides=args.reference_set,
-                              noise_floor=not args.no_noise_floor)
+                              noise_floor=not args.no_noise_floor, alone=alone)
         error = None
     except Exception as exc:               # deterministic on every rank: all return together
         error = str(exc)
@@ -126,33 +154,49 @@ def main(args, comm=None) -> int:
                                args.scene, comm, directory, every=args.every, say=say)
     code = 0
     if comm.rank == 0:
-        code = write_outputs(outcomes, axes, directory, scene, args, comm.size, say)
+        code = write_outputs(outcomes, {**axes, **alone}, directory, scene, args, comm.size, say,
+                             support_area=support_disc_area(_base_scene(raw, args.overrides)))
     return int(comm.bcast(code))
 
 
-def write_outputs(outcomes, axes, directory, scene, args, ranks, say) -> int:
+def _base_scene(raw: dict, overrides) -> dict:
+    from ..config.load import apply_overrides
+    return apply_overrides(sweep.normalise_scene(raw), tuple(overrides))
+
+
+def _command(args, ranks: int) -> str:
+    """The command as typed (from sys.argv), for the report's first line."""
+    if len(sys.argv) > 3 and sys.argv[1:3] == ["study", "accuracy"]:
+        return (f"scripts/mpiexec.sh {ranks} .venv/bin/python -m distcloth study accuracy "
+                + " ".join(shlex.quote(a) for a in sys.argv[3:]))
+    return f"distcloth study accuracy {args.scene}"
+
+
+def write_outputs(outcomes, axes, directory, scene, args, ranks, say, *, support_area=0.0) -> int:
     from . import accuracy_report as rep
     try:
-        rows, noise = analyse(outcomes, divergence=args.divergence)
+        rows, noise = analyse(outcomes, divergence=args.divergence, support_area=support_area)
     except RuntimeError as exc:
         say(f"error: {exc}")
         return 1
-    error = "com_max_error" if args.chaotic else "rms_mean"
-    var = [r for r in rows if r["role"] == "variant"]
+    chaos = rep.chaos(noise, args.divergence, forced=args.chaotic)
+    if chaos["auto"]:
+        say(f"the noise floor diverges at t = {chaos['horizon']:.3g} s: treated as chaotic")
+    error = rep.ranking_metric(chaos["chaotic"])
+    # a variant that stopped early is compared over its frames only: not ranked
+    var = [r for r in rows if r["role"] == "variant" and r["status"] == "completed"]
     for i in rep.pareto(var, error=error):
         var[i]["pareto"] = True
     stages = sorted({s for r in rows for s, v in r["stages"].items() if v > 0})
     csv_path = os.path.join(directory, "accuracy.csv")
     rep.write_csv(csv_path, rows, list(axes), stages)
-    plots = rep.plot(os.path.join(directory, ""), rows, noise, stages, error=error)
+    plots = rep.plot(os.path.join(directory, ""), rows, noise, stages, error=error, chaos=chaos)
     ref = next(o.variant for o in outcomes if o.variant.role == "reference")
-    command = (f"scripts/mpiexec.sh {ranks} .venv/bin/python -m distcloth study accuracy "
-               + " ".join(shlex.quote(a) for a in sys.argv[3:]) if len(sys.argv) > 3 else
-               f"distcloth study accuracy {args.scene}")
     md = os.path.join(directory, "accuracy.md")
-    rep.write_markdown(md, rows, axes, noise, scene=scene, command=command,
+    rep.write_markdown(md, rows, axes, noise, scene=scene, command=_command(args, ranks),
                        reference_label=", ".join(o for o in ref.overrides if o not in args.overrides),
-                       plots=plots, error=error, chaotic=args.chaotic)
+                       plots=plots, error=error, chaos=chaos, divergence=args.divergence,
+                       support_area=support_area, alone=list(sweep.parse_vary(args.alone)))
     say(f"wrote {md}, {csv_path} and {len(plots)} plots")
     failed = [r["label"] for r in rows if r["status"] != "completed"]
     if failed:

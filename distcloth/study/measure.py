@@ -2,9 +2,6 @@
 simulator's own diagnostics (collective: every rank calls these together
 and gets the same numbers).
 
-* ``energies``: kinetic, gravitational and elastic energy of every force
-  term that has a potential (springs, FE membrane, hinges, shells); the
-  driver's ``elastic_energy`` diagnostic counts spring terms only.
 * ``PenetrationOracle``: the worst depth (d - phi) / d of a free vertex inside
   a collider, from fresh collider objects built from the scene (analytic
   signed distances), at the step's end time.
@@ -12,27 +9,6 @@ and gets the same numbers).
 from __future__ import annotations
 
 import numpy as np
-
-
-def energies(sim) -> tuple[float, float, float]:
-    """(kinetic, gravitational, elastic) of the current state, summed over ranks."""
-    n = sim.n_owned
-    kinetic = 0.5 * float(np.sum(sim.mass[:n] * np.einsum("ij,ij->i", sim.v[:n], sim.v[:n])))
-    grav = elastic = 0.0
-    for t in sim.terms:
-        if t.name == "force:gravity":
-            grav += t.energy(sim.x)
-        else:                      # damping and drag have no potential: energy() is 0
-            elastic += t.energy(sim.x)
-    k, g, e = sim.comm.sum(np.array([kinetic, grav, elastic]))
-    return float(k), float(g), float(e)
-
-
-def gravity_scale(cfg, model) -> float:
-    """M |g| L: the gravitational energy a cloth of mass M and size L can exchange."""
-    if not cfg.has("gravity"):
-        return 0.0
-    return float(model.vertex_mass.sum() * np.linalg.norm(cfg.gravity) * model.size())
 
 
 class PenetrationOracle:

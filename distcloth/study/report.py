@@ -28,6 +28,12 @@ def _cause(reason: str) -> str:
     m = re.match(r"energy above E_ref \+ [0-9.e+-]+ S; largest excess ([0-9.e+-]+) S", why)
     if m:
         return f"energy up to E_ref + {float(m.group(1)):.3g} S"
+    m = re.match(r"energy gain: total energy ([0-9.e+-]+) S above", why)
+    if m:
+        return f"energy gain {float(m.group(1)):.2g} S"
+    m = re.match(r"Newton did not converge in (\d+) iterations", why)
+    if m:
+        return f"Newton unconverged ({m.group(1)} its)"
     m = re.match(r"a vertex ([0-9.e+-]+) d inside a collider", why)
     if m:
         return f"a vertex {float(m.group(1)):.2g} d inside a collider"
@@ -148,7 +154,9 @@ def markdown(results, cases, integrators, settings, *, reduced, ranks, wall, com
         "",
         "- **survived**: the run reached its end and every step passed the criteria below;",
         "- **stopped**: the simulator raised an error naming the step and the cause (NaN, "
-        "blow-up above 1000 m/s, failed solve): a clear stop, the result file says so; "
+        "blow-up above 1000 m/s, failed solve, or its energy guard: a passive scene's "
+        "energy above E_ref + 0.1 S, the same bound as criterion 2, "
+        "distcloth/energy_guard.py): a clear stop, the result file says so; "
         "\"garbage from step k\" when earlier steps already broke a criterion;",
         "- **refused**: the scene was refused before the first step (explicit schemes above "
         "their Gershgorin step limit; `distcloth run --force` overrides it);",

@@ -154,7 +154,8 @@ def _explicit_step(case, raw, comm, fraction):
 
 def run_variant(case, integrator: str, setting: Setting, comm, reduced: bool = False) -> Result:
     """Simulate one variant and classify it; collective on ``comm``."""
-    from .measure import PenetrationOracle, energies, gravity_scale
+    from .measure import PenetrationOracle
+    from ..energy_guard import gravity_scale
     from ..simulation import SimulationError
     t0 = time.perf_counter()
     raw = scene_for(case, integrator, setting, reduced)
@@ -177,13 +178,13 @@ def run_variant(case, integrator: str, setting: Setting, comm, reduced: bool = F
         return res
     oracle = PenetrationOracle(sim.cfg)
     trace = Trace(gravity_scale=gravity_scale(sim.cfg, sim.model))
-    ke, ge, el = energies(sim)
+    ke, ge, el = sim.energies()
     trace.start_energy, trace.start_kinetic, trace.start_elastic = ke + ge + el, ke, el
     stop = None
     try:
         for _ in range(res.steps_planned):
             sim.step()
-            trace.record(sim.time, *energies(sim), oracle.worst(sim))
+            trace.record(sim.time, *sim.energies(), oracle.worst(sim))
     except SimulationError as exc:
         stop = (exc.step, str(exc))
     finally:

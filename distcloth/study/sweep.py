@@ -30,13 +30,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# the preconditioners as measured in docs/benchmarks.md (scripts/bench_step.py): the AMGs
+# on AIJ (PETSc's GAMG cannot build its graph from BAIJ), with the settings tuned there
 PC_PRESETS = {
     "jacobi": {"solver.pc_type": "jacobi"},
     "bjacobi_sgs": {"solver.pc_type": "bjacobi", "solver.sub_pc_type": "sor"},
     "sgs32": {"solver.pc_type": "python",
               "solver.pc_python_type": "distcloth.linalg.sgs32.SinglePrecisionSGS"},
-    "gamg": {"solver.pc_type": "gamg"},
-    "hypre": {"solver.pc_type": "hypre"},
+    "gamg": {"solver.pc_type": "gamg", "solver.mat_type": "aij",
+             "solver.pc_gamg_reuse_interpolation": "true", "solver.pc_gamg_threshold": "0.02",
+             "solver.mg_levels_ksp_type": "richardson", "solver.mg_levels_pc_type": "sor",
+             "solver.mg_levels_ksp_max_it": "1"},
+    "hypre": {"solver.pc_type": "hypre", "solver.mat_type": "aij", "solver.pc_hypre_type": "boomeramg",
+              "solver.pc_hypre_boomeramg_coarsen_type": "HMIS",
+              "solver.pc_hypre_boomeramg_interp_type": "ext+i",
+              "solver.pc_hypre_boomeramg_P_max": "4",
+              "solver.pc_hypre_boomeramg_strong_threshold": "0.7"},
 }
 REFERENCE_DEFAULTS = ("time.integrator=bdf2", "time.newton_iterations=8",
                       "time.newton_tolerance=1e-10", "solver.ksp_rtol=1e-10",
@@ -55,9 +64,12 @@ class Variant:
     settings: tuple                # ((axis, value text), ...) as the user gave them
     overrides: tuple               # key.path=value, applied after the base overrides
     perturb: float = 0.0           # m, start positions moved (noise floor only)
+    alone: bool = False            # an --alone axis value, varied around the base scene
+    base: bool = False             # resolves to the base scene: what --alone variants compare with
 
     def label(self) -> str:
-        return ", ".join(f"{k}={v}" for k, v in self.settings) or self.role
+        return ", ".join(f"{k}={v}" for k, v in self.settings) or (
+            "base scene" if self.base else self.role)
 
 
 @dataclass
@@ -145,29 +157,70 @@ def _resolved_time_step(raw: dict, base_overrides) -> float:
     return float(step)
 
 
-def plan(raw: dict, axes: dict[str, list[str]], base_overrides=(), *, one_at_a_time=False,
-         reference_overrides=(), noise_floor=True) -> list[Variant]:
-    """The variants (full product of the axes, or each axis alone around the base),
-    then the reference and its perturbed rerun."""
-    raw = normalise_scene(raw)
-    base_overrides = tuple(base_overrides)
+def _resolved(raw: dict, overrides) -> dict:
+    from ..config.load import apply_overrides
+    return apply_overrides(raw, tuple(overrides))
+
+
+def _combos(axes: dict[str, list[str]], one_at_a_time: bool) -> list[tuple]:
     if one_at_a_time:
-        combos = [((k, v),) for k, vals in axes.items() for v in vals]
-    else:
-        combos = [tuple(zip(axes, vals)) for vals in itertools.product(*axes.values())]
-    variants = []
-    for settings in combos:
-        ov = base_overrides + tuple(o for k, v in settings for o in expand(raw, k, v))
-        variants.append(Variant(_name("variant", ov), "variant", settings, ov))
-    # the reference: smallest step / 4, finest resolution, tight solves
-    steps = [float(v) for v in axes.get("time.step", [])] or [_resolved_time_step(raw, base_overrides)]
+        return [((k, v),) for k, vals in axes.items() for v in vals]
+    return [tuple(zip(axes, vals)) for vals in itertools.product(*axes.values())]
+
+
+def _base_resolution(raw: dict, base_overrides) -> str | None:
+    """The first grid piece's resolution in the base scene, as an axis value."""
+    r = _resolved(raw, base_overrides)
+    pieces = _grid_pieces(r)
+    if not pieces:
+        return None
+    return str(list(r["cloth"][pieces[0]]["mesh"]["grid"].get("resolution", [])))
+
+
+def _reference(raw, axes, base_overrides, reference_overrides, with_base=False) -> tuple:
+    """The reference's overrides: smallest step / 4, finest resolution, tight solves;
+    ``with_base``: the base scene is a variant too, so its step and mesh count."""
+    import yaml
+    steps = [float(v) for v in axes.get("time.step", [])]
+    if with_base or not steps:
+        steps.append(_resolved_time_step(raw, base_overrides))
     ref = base_overrides + tuple(REFERENCE_DEFAULTS) + (
         f"time.step={min(steps) / REFERENCE_STEP_FACTOR!r}",)
     if "resolution" in axes:
-        import yaml
-        finest = max(axes["resolution"], key=lambda s: np.prod(np.atleast_1d(yaml.safe_load(s))))
-        ref += expand(raw, "resolution", finest)
-    ref += tuple(reference_overrides)
+        values = list(axes["resolution"])
+        base_res = _base_resolution(raw, base_overrides) if with_base else None
+        if base_res is not None:
+            values.append(base_res)
+        finest = max(values, key=lambda s: np.prod(np.atleast_1d(yaml.safe_load(s))))
+        if finest != base_res:           # the base mesh needs no override
+            ref += expand(raw, "resolution", finest)
+    return ref + tuple(reference_overrides)
+
+
+def plan(raw: dict, axes: dict[str, list[str]], base_overrides=(), *, one_at_a_time=False,
+         reference_overrides=(), noise_floor=True, alone=None) -> list[Variant]:
+    """The variants (full product of the axes, or each axis alone around the base),
+    then each value of the ``alone`` axes by itself around the base scene (with the
+    variant that is the base scene, added if no product variant resolves to it),
+    then the reference and its perturbed rerun."""
+    raw = normalise_scene(raw)
+    base_overrides = tuple(base_overrides)
+    alone = alone or {}
+    base_scene = _resolved(raw, base_overrides) if alone else None
+    variants = []
+    for settings in _combos(axes, one_at_a_time) if axes or not alone else []:
+        ov = base_overrides + tuple(o for k, v in settings for o in expand(raw, k, v))
+        is_base = bool(alone) and _resolved(raw, ov) == base_scene
+        variants.append(Variant(_name("variant", ov), "variant", settings, ov, base=is_base))
+    if alone and not any(v.base for v in variants):
+        variants.append(Variant(_name("variant", base_overrides), "variant", (), base_overrides,
+                                base=True))
+    for k, vals in alone.items():
+        for v in vals:
+            ov = base_overrides + expand(raw, k, v)
+            variants.append(Variant(_name("variant", ov), "variant", ((k, v),), ov, alone=True))
+    every_axis = {k: list(axes.get(k, [])) + list(alone.get(k, [])) for k in {**axes, **alone}}
+    ref = _reference(raw, every_axis, base_overrides, reference_overrides, with_base=bool(alone))
     out = variants + [Variant(_name("reference", ref), "reference", (), ref)]
     if noise_floor:
         out.append(Variant(_name("noise", ref), "noise", (), ref, perturb=NOISE_AMPLITUDE))
@@ -221,7 +274,7 @@ def perturb_start(sim, amplitude: float, seed: int = 20240601) -> None:
 def run_variant(cfg, comm, path: str, *, perturb: float = 0.0, progress: bool = False):
     """One run, as ``distcloth.run.run`` does it, into ``path``; collective.
     Returns (status, wall seconds of the slowest rank, message)."""
-    from ..run import open_writer, setup
+    from ..run import open_writer, setup, write_steps
     from ..simulation import DIAGNOSTICS, SimulationError
     t0 = time.perf_counter()
     sim, code = setup(cfg, comm, quiet=True)
@@ -239,14 +292,7 @@ def run_variant(cfg, comm, path: str, *, perturb: float = 0.0, progress: bool = 
     bar = _progress(comm, n_steps, progress)
     status, message = "completed", ""
     try:
-        for k in range(1, n_steps + 1):
-            diag = sim.step()
-            times, calls = sim.pipeline.take_step_counters()
-            writer.write_step(k, sim.time, diag, times, calls)
-            if k % every == 0 or k == n_steps:
-                sim.pipeline.run("output", writer)
-            if bar:
-                bar.update(k, sim.time)
+        write_steps(sim, writer, n_steps, every, bar)
     except SimulationError as exc:
         writer.record_error(exc.step, str(exc))
         status, message = "failed", str(exc)
