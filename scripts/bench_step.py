@@ -24,27 +24,23 @@ import sys
 import time
 from pathlib import Path
 
+from distcloth.linalg.presets import PRECONDITIONERS
+
 ROOT = Path(__file__).resolve().parents[1]
 
-SOLVERS = {
-    # name: (PETSc options, mat_type).  The AMG settings are the best of a
-    # small sweep on the 100k case (docs/benchmarks.md): GAMG with one
-    # symmetric-SOR sweep per level and a 0.02 aggregation threshold, hypre
-    # BoomerAMG with HMIS coarsening and ext+i interpolation.
-    "bjacobi+sgs": ({"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "sor"}, "baij"),
-    "gamg": ({"ksp_type": "cg", "pc_type": "gamg", "pc_gamg_reuse_interpolation": "true",
-              "pc_gamg_threshold": 0.02, "mg_levels_ksp_type": "richardson",
-              "mg_levels_pc_type": "sor", "mg_levels_ksp_max_it": 1}, "aij"),
-    "hypre": ({"ksp_type": "cg", "pc_type": "hypre", "pc_hypre_type": "boomeramg",
-               "pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
-               "pc_hypre_boomeramg_P_max": 4, "pc_hypre_boomeramg_strong_threshold": 0.7}, "aij"),
-}
+def _cg(name):
+    """CG with one of distcloth's named preconditioners (distcloth/linalg/presets.py,
+    where the AMG settings tuned on the 100k case live)."""
+    options, mat_type = PRECONDITIONERS[name]
+    return {"ksp_type": "cg", **options}, mat_type
+
+
+SOLVERS = {"bjacobi+sgs": _cg("bjacobi_sgs"), "gamg": _cg("gamg"), "hypre": _cg("hypre")}
 # not in the default sweep: GAMG rebuilt only every 5th solve and reused in between
 EXTRA_SOLVERS = {
     "gamg-rebuild5": ({**SOLVERS["gamg"][0], "pc_rebuild_every": 5}, "aij"),
     # seed 000 §5.7: the reference preconditioner with a float32 matrix (numba, Python PC)
-    "sgs32": ({"ksp_type": "cg", "pc_type": "python",
-               "pc_python_type": "distcloth.linalg.sgs32.SinglePrecisionSGS"}, "baij"),
+    "sgs32": _cg("sgs32"),
 }
 
 

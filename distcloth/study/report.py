@@ -17,26 +17,26 @@ def _short(text: str, n: int = 70) -> str:
     return text if len(text) <= n else text[: n - 1] + "…"
 
 
+# (pattern of a stop's or failure's cause, its short form from the match)
+_CAUSES = (
+    (r"blow-up: a vertex moves at ([0-9.e+-]+) m/s", lambda m: f"blow-up ({float(m[1]):.2g} m/s)"),
+    (r"NaN or Inf", lambda m: "NaN/Inf in the state"),
+    (r"energy above E_ref \+ [0-9.e+-]+ S; largest excess ([0-9.e+-]+) S",
+     lambda m: f"energy up to E_ref + {float(m[1]):.3g} S"),
+    (r"energy gain: total energy ([0-9.e+-]+) S above", lambda m: f"energy gain {float(m[1]):.2g} S"),
+    (r"Newton did not converge in (\d+) iterations", lambda m: f"Newton unconverged ({m[1]} its)"),
+    (r"a vertex ([0-9.e+-]+) d inside a collider",
+     lambda m: f"a vertex {float(m[1]):.2g} d inside a collider"),
+)
+
+
 def _cause(reason: str) -> str:
     """The short form of a stop's or failure's cause for a table cell."""
     why = re.sub(r"^step \d+: ", "", reason)
-    m = re.match(r"blow-up: a vertex moves at ([0-9.e+-]+) m/s", why)
-    if m:
-        return f"blow-up ({float(m.group(1)):.2g} m/s)"
-    if why.startswith("NaN or Inf"):
-        return "NaN/Inf in the state"
-    m = re.match(r"energy above E_ref \+ [0-9.e+-]+ S; largest excess ([0-9.e+-]+) S", why)
-    if m:
-        return f"energy up to E_ref + {float(m.group(1)):.3g} S"
-    m = re.match(r"energy gain: total energy ([0-9.e+-]+) S above", why)
-    if m:
-        return f"energy gain {float(m.group(1)):.2g} S"
-    m = re.match(r"Newton did not converge in (\d+) iterations", why)
-    if m:
-        return f"Newton unconverged ({m.group(1)} its)"
-    m = re.match(r"a vertex ([0-9.e+-]+) d inside a collider", why)
-    if m:
-        return f"a vertex {float(m.group(1)):.2g} d inside a collider"
+    for pattern, short in _CAUSES:
+        m = re.match(pattern, why)
+        if m:
+            return short(m)
     return _short(why, 60)
 
 

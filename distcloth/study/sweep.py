@@ -30,23 +30,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# the preconditioners as measured in docs/benchmarks.md (scripts/bench_step.py): the AMGs
-# on AIJ (PETSc's GAMG cannot build its graph from BAIJ), with the settings tuned there
-PC_PRESETS = {
-    "jacobi": {"solver.pc_type": "jacobi"},
-    "bjacobi_sgs": {"solver.pc_type": "bjacobi", "solver.sub_pc_type": "sor"},
-    "sgs32": {"solver.pc_type": "python",
-              "solver.pc_python_type": "distcloth.linalg.sgs32.SinglePrecisionSGS"},
-    "gamg": {"solver.pc_type": "gamg", "solver.mat_type": "aij",
-             "solver.pc_gamg_reuse_interpolation": "true", "solver.pc_gamg_threshold": "0.02",
-             "solver.mg_levels_ksp_type": "richardson", "solver.mg_levels_pc_type": "sor",
-             "solver.mg_levels_ksp_max_it": "1"},
-    "hypre": {"solver.pc_type": "hypre", "solver.mat_type": "aij", "solver.pc_hypre_type": "boomeramg",
-              "solver.pc_hypre_boomeramg_coarsen_type": "HMIS",
-              "solver.pc_hypre_boomeramg_interp_type": "ext+i",
-              "solver.pc_hypre_boomeramg_P_max": "4",
-              "solver.pc_hypre_boomeramg_strong_threshold": "0.7"},
-}
+from ..linalg.presets import PRECONDITIONERS
+
+def _pc_overrides(options: dict, mat_type: str) -> dict:
+    """One preset as scene overrides: pc_type, the matrix type where it is not
+    the default BAIJ, then the preconditioner's own options."""
+    out = {"solver.pc_type": options["pc_type"]}
+    if mat_type != "baij":
+        out["solver.mat_type"] = mat_type
+    out.update({f"solver.{k}": v for k, v in options.items() if k != "pc_type"})
+    return out
+
+
+# the preconditioners as measured in docs/benchmarks.md (distcloth/linalg/presets.py)
+PC_PRESETS = {name: _pc_overrides(*preset) for name, preset in PRECONDITIONERS.items()}
 REFERENCE_DEFAULTS = ("time.integrator=bdf2", "time.newton_iterations=8",
                       "time.newton_tolerance=1e-10", "solver.ksp_rtol=1e-10",
                       "solver.ksp_norm_type=unpreconditioned")
@@ -289,7 +286,8 @@ def run_variant(cfg, comm, path: str, *, perturb: float = 0.0, progress: bool = 
                          {"steps": n_steps, "output_every_steps": every, "study_perturb": perturb})
     sim.pipeline.run("output", writer)
     sim.pipeline.take_step_counters()
-    bar = _progress(comm, n_steps, progress)
+    from ..simulation import Progress
+    bar = Progress(comm, n_steps, enabled=progress)
     status, message = "completed", ""
     try:
         write_steps(sim, writer, n_steps, every, bar)
@@ -319,13 +317,6 @@ def warm_up(cfg, comm, directory: str) -> None:
             if os.path.exists(p):
                 os.remove(p)
     comm.barrier()
-
-
-def _progress(comm, n_steps, enabled):
-    if not enabled:
-        return None
-    from ..simulation import Progress
-    return Progress(comm, n_steps)
 
 
 def run_sweep(variants, raw: dict, base_dir: str, source_name: str, comm, directory: str, *,
