@@ -3,13 +3,23 @@ and ``distcloth study NAME [options]`` (distcloth/study/).
 
 Arguments with a single leading dash (``-distcloth_ksp_rtol 1e-8``,
 ``-log_view``) are PETSc options and go to PETSc untouched; the command
-line wins over the scene's ``solver:`` section.
+line wins over the scene's ``solver:`` section.  The keys of the scene's
+``linear_system:`` section are written the same way (``-distcloth_mat_type
+aij``) but are scene settings: they are taken out of PETSc's options and
+checked like ``--set linear_system.mat_type=aij``.
 """
 from __future__ import annotations
 
 import argparse
 import sys
 import traceback
+
+from .config import ConfigError, format_config_error, load_config
+from .config.load import command_line_key, own_option_names
+from .linalg.petsc import command_line_options, init_petsc, take_options
+from .parallel.comm import Comm
+from .run import drape, run
+from .study import add_study_parsers, run_study
 
 
 def split_petsc_args(argv: list[str]) -> tuple[list[str], list[str]]:
@@ -58,12 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "run":
             s.add_argument("--force", action="store_true",
                            help="run an explicit step above the stability limit anyway")
-    from .study import STUDIES, add_study_parsers
-    # the accuracy study registers beside stability (distcloth/study/accuracy.py)
-    STUDIES.setdefault("accuracy", ("the accuracy study (issue 6): sweep settings, errors against "
-                                    "a finer reference, CSV + report + plots",
-                                    "distcloth.study.accuracy"))
-    add_study_parsers(sub.add_parser("study", help="studies of the simulator (stability suite)",
+    add_study_parsers(sub.add_parser("study", help="studies of the simulator (accuracy "
+                                                   "against time, stability suite)",
                                      allow_abbrev=False))
     return p
 
@@ -73,12 +79,12 @@ def main(argv: list[str] | None = None) -> int:
     ours, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(ours)
 
-    from .linalg.petsc import command_line_options, init_petsc
     init_petsc(petsc_args)
-    from .parallel.comm import Comm
+    # out of the database before PETSc could report them as unused options
+    own_options = take_options(own_option_names())
     comm = Comm()
     try:
-        return _main(args, comm, command_line_options())
+        return _main(args, comm, command_line_options(), own_options)
     except SystemExit:
         raise
     except BaseException:  # a bug: never leave the other ranks waiting
@@ -88,22 +94,25 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
-def _main(args, comm, cmdline_options) -> int:
+def _main(args, comm, cmdline_options, own_options=None) -> int:
     if args.command == "study":          # no scene: the study builds its own
-        from .study import run_study
+        for name, value in (own_options or {}).items():
+            if comm.rank == 0:
+                print(format_config_error(ConfigError(
+                    command_line_key(name), value, "a scene setting (linear_system): "
+                    "not taken by distcloth study")), file=sys.stderr, flush=True)
+            return 2
         return run_study(args, comm)
-    from .config import ConfigError, format_config_error, load_config
-    from .run import run
     cfg, message = None, None
     if comm.rank == 0:
         try:
-            cfg = load_config(args.scene, args.overrides)
+            cfg = load_config(args.scene, args.overrides, own_options)
             output = getattr(args, "output", None)
             if output is not None and not output.lower().endswith((".h5", ".hdf5")):
                 raise ConfigError("--output", output, "a file name ending in .h5 or .hdf5")
         except ConfigError as exc:
             message = format_config_error(exc)
-    cfg, message = comm.bcast((cfg, message))
+    cfg, message = comm.broadcast((cfg, message))
     if message is not None:
         if comm.rank == 0:
             print(message, file=sys.stderr, flush=True)
@@ -111,7 +120,6 @@ def _main(args, comm, cmdline_options) -> int:
     if args.command == "check":
         return run(cfg, comm, cmdline_options=cmdline_options, check_only=True)
     if args.command == "drape":
-        from .run import drape
         return drape(cfg, comm, output=args.output, cmdline_options=cmdline_options,
                      quiet=args.quiet)
     return run(cfg, comm, output=args.output, force=args.force,

@@ -38,30 +38,29 @@ def gravity_scale(cfg, model) -> float:
 
 
 class EnergyGuard:
+    """The guard's settings; its reference (E_ref, S) is part of the State,
+    taken at the first committed state of the passive window."""
+
     def __init__(self, gain: float | None, drive_end: float, gravity_scale: float):
         self.gain = gain                   # None: off
         self.drive_end = float(drive_end)  # s: colliders move until here
         self.gravity_scale = float(gravity_scale)
-        self.reference = None              # (E_ref, S) once the window has started
 
-    @property
-    def active(self) -> bool:
-        return self.gain is not None and self.reference is not None
-
-    def wants_reference(self, t: float) -> bool:
+    def wants_reference(self, t: float, reference) -> bool:
         """True at the first committed state of the passive window."""
-        return self.gain is not None and self.reference is None and t >= self.drive_end - 1e-12
+        return self.gain is not None and reference is None and t >= self.drive_end - 1e-12
 
-    def set_reference(self, kinetic: float, gravitational: float, elastic: float) -> None:
+    def reference(self, kinetic: float, gravitational: float, elastic: float) -> tuple[float, float]:
+        """(E_ref, S) of the state where the scene became passive."""
         scale = abs(kinetic) + abs(elastic) + self.gravity_scale
-        self.reference = (kinetic + gravitational + elastic, max(scale, SCALE_FLOOR))
+        return kinetic + gravitational + elastic, max(scale, SCALE_FLOOR)
 
-    def check(self, kinetic: float, gravitational: float, elastic: float) -> str | None:
+    def check(self, reference, kinetic: float, gravitational: float, elastic: float) -> str | None:
         """The rejection reason of a tentative state, or None (same on every rank:
         the energies are global sums)."""
-        if not self.active:
+        if self.gain is None or reference is None:
             return None
-        e_ref, scale = self.reference
+        e_ref, scale = reference
         excess = (kinetic + gravitational + elastic - e_ref) / scale
         if excess > self.gain:
             return (f"energy gain: total energy {excess:.3g} S above the passive scene's "

@@ -10,11 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# spring kinds (seed 002 §2.2)
+# spring kinds (Vassilev et al. 2001 §2.2)
 STRUCTURAL = 0
 SHEAR = 1
 FLEXION = 2
-SPRING_KIND_NAMES = ("structural", "shear", "flexion")
 
 
 @dataclass

@@ -1,14 +1,18 @@
-"""The step as a list of named stages, each with a switch, a call counter and a timer.
+"""The step's stages at run time: each with a switch, a call counter and a timer.
 
-A stage that is off is never called: ``run`` returns None without touching
-its function, so what a scene does not ask for costs nothing.  The counters
-prove it (tests read them from the output file).
+The stages and their order come from ``distcloth/stages.py``; a simulation
+binds a function to each stage its scene has.  A stage that is off is never
+called: ``run`` returns None without touching its function, so what a scene
+does not ask for costs nothing.  The counters prove it (tests read them from
+the output file).
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
 from typing import Callable
+
+from .stages import STAGES
 
 
 @dataclass
@@ -25,11 +29,21 @@ class Stage:
 @dataclass
 class Pipeline:
     stages: dict[str, Stage] = field(default_factory=dict)
+    trace: list[str] | None = None    # a list: every call's stage name is appended (tests)
 
-    def add(self, name: str, fn: Callable | None, enabled: bool = True) -> None:
-        if name in self.stages:
-            raise ValueError(f"stage {name} added twice")
-        self.stages[name] = Stage(name, fn, enabled and fn is not None)
+    @classmethod
+    def bind(cls, bindings: dict[str, tuple[Callable | None, bool]]) -> "Pipeline":
+        """The declared stages that have a binding (name -> (function, enabled)),
+        in the declared order."""
+        unknown = set(bindings) - set(STAGES)
+        if unknown:
+            raise ValueError(f"stages not declared in distcloth/stages.py: {sorted(unknown)}")
+        p = cls()
+        for name in STAGES:
+            if name in bindings:
+                fn, enabled = bindings[name]
+                p.stages[name] = Stage(name, fn, bool(enabled) and fn is not None)
+        return p
 
     def enabled(self, name: str) -> bool:
         st = self.stages.get(name)
@@ -39,6 +53,8 @@ class Pipeline:
         st = self.stages[name]
         if not st.enabled:
             return None
+        if self.trace is not None:
+            self.trace.append(name)
         t0 = time.perf_counter()
         try:
             return st.fn(*args, **kwargs)
@@ -48,11 +64,6 @@ class Pipeline:
             st.seconds += dt
             st.step_calls += 1
             st.step_seconds += dt
-
-    def timed(self, name: str):
-        """Context manager that charges a block of code to a stage (for stages
-        whose work is inline, e.g. the solve inside an integrator)."""
-        return _Timed(self.stages[name])
 
     def names(self) -> list[str]:
         return list(self.stages)
@@ -67,25 +78,8 @@ class Pipeline:
 
     def summary(self) -> str:
         total = sum(s.seconds for s in self.stages.values()) or 1.0
-        lines = [f"{'stage':<18}{'on':>4}{'calls':>9}{'seconds':>11}{'share':>8}"]
+        lines = [f"{'stage':<20}{'on':>4}{'calls':>9}{'seconds':>11}{'share':>8}"]
         for s in self.stages.values():
-            lines.append(f"{s.name:<18}{'yes' if s.enabled else 'no':>4}{s.calls:>9}"
+            lines.append(f"{s.name:<20}{'yes' if s.enabled else 'no':>4}{s.calls:>9}"
                          f"{s.seconds:>11.3f}{100 * s.seconds / total:>7.1f}%")
         return "\n".join(lines)
-
-
-class _Timed:
-    def __init__(self, stage: Stage):
-        self.stage = stage
-
-    def __enter__(self):
-        self.t0 = time.perf_counter()
-        return self
-
-    def __exit__(self, *exc):
-        dt = time.perf_counter() - self.t0
-        self.stage.calls += 1
-        self.stage.seconds += dt
-        self.stage.step_calls += 1
-        self.stage.step_seconds += dt
-        return False

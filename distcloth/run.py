@@ -14,12 +14,19 @@ import os
 import sys
 import time
 
+import numpy as np
+
+from .config import format_config_error
 from .config.schema import ConfigError
-from .simulation import DIAGNOSTICS, STAGES, Progress, Simulation, SimulationError, log
+from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
+from .io.console import Progress, log
+from .io.h5writer import ResultWriter
+from .scene import build_model
+from .simulation import DIAGNOSTICS, Simulation, SimulationError
+from .stages import STAGES
 
 
 def _agree_config(comm, err: ConfigError | None):
-    from .config import format_config_error
     agreed = comm.agree(format_config_error(err) if err is not None else None)
     if agreed is not None:
         if comm.rank == 0:
@@ -30,7 +37,6 @@ def _agree_config(comm, err: ConfigError | None):
 
 def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
     """Build the model and the simulation; returns (sim, exit code)."""
-    from .scene import build_model
     err = None
     model = None
     try:
@@ -55,8 +61,6 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
 
 def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
     """The run's result file, with what the run was (collective)."""
-    import numpy as np
-    from .io.h5writer import ResultWriter
     lay = sim.layout
     attrs = {
         "scene": cfg.scene, "ranks": comm.size, "integrator": cfg.time.integrator,
@@ -68,7 +72,7 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
         "edge_cut": lay.edge_cut, "imbalance": lay.imbalance, "cloth_size": sim.model.size(),
         **extra_attrs,
     }
-    return ResultWriter(path, comm.mpi_comm if comm.under_mpiexec else None,
+    return ResultWriter(path, comm if comm.under_mpiexec else None,
                         rest_positions=sim.model.rest_positions, triangles=sim.model.triangles,
                         owned_input=lay.owned_input, part=lay.part, config_text=cfg.source_text,
                         attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names)
@@ -82,11 +86,11 @@ def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
         # the step's row first, so the frame's flush carries it; the output
         # stage's time is charged to the following step's row
         times, calls = sim.pipeline.take_step_counters()
-        writer.write_step(k, sim.time, diag, times, calls)
+        writer.write_step(k, sim.state.t, diag, times, calls)
         if k % every == 0 or k == n_steps:
             sim.pipeline.run("output", writer)
         if bar:
-            bar.update(k, sim.time)
+            bar.update(k, sim.state.t)
 
 
 def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only=False,
@@ -103,10 +107,10 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
     h = cfg.time.step
     n_steps = max(1, int(round(cfg.time.end / h)))
     every = max(1, int(round(cfg.output.every / h)))
-    image = {f"image_error_bound/{name}": bound
-             for name, bound in sim.collisions.image_error_bounds.items()}
-    for name, (du, dv) in sim.collisions.image_error_bounds.items():
-        log(comm, f"image-space collider {name}: x-y error bound (seed 002 Eq. 14) "
+    bounds = sim.contact.image_error_bounds()
+    image = {f"image_error_bound/{name}": list(bound) for name, bound in bounds.items()}
+    for name, (du, dv) in bounds.items():
+        log(comm, f"image-space collider {name}: x-y error bound (Vassilev et al. 2001 Eq. 14) "
                   f"{1e3 * du:.2f} x {1e3 * dv:.2f} mm")
     writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
                          {"steps": n_steps, "output_every_steps": every, **image})
@@ -123,7 +127,7 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         status, code = "failed", 1
     writer.close(status)
     wall = time.perf_counter() - t_start
-    traversal = sim.collisions.traversal_summary()      # collective
+    traversal = sim.contact.traversal_summary()      # collective
     if not quiet:
         log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
         if traversal:
@@ -136,9 +140,9 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
 
 
 def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
-    """``distcloth drape``: relax to the rest state (seed 004); a frame every
-    ``drape.frame_every`` iterations and the last; frame 'time' is the iteration."""
-    from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
+    """``distcloth drape``: relax to the rest state (Volino and Magnenat-Thalmann
+    2007); a frame every ``drape.frame_every`` iterations and the last; frame
+    'time' is the iteration."""
     t_start = time.perf_counter()
     sim, code = setup(cfg, comm, cmdline_options=cmdline_options, quiet=quiet)
     if code:
@@ -184,6 +188,7 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
 def _previews(cfg, comm, path):
     if cfg.output.preview and comm.rank == 0:
         try:
+            # matplotlib takes a second to import: only runs that draw pay for it
             from .io.preview import write_previews
             for p in write_previews(path):
                 log(comm, f"preview: {os.path.abspath(p)}")

@@ -1,5 +1,5 @@
 """Body-collision query cost and accuracy: BVH closest point
-(``MeshProximity``) against seed 002's image-space maps (``ImageSpaceCollider``)
+(``MeshProximity``) against Vassilev et al. 2001's image-space maps (``ImageSpaceCollider``)
 on the shipped torso.
 
 Cloth-like points: N points sampled uniformly (by area) on the torso
@@ -16,7 +16,7 @@ differing points whose pixel is not covered by the body (beside the
 silhouette) or whose map normal is steeper than 60 degrees to the image
 plane; the last column is the differing fraction among the other
 ("resolved") points.  The maps view the torso front/back (axis 1, as in
-the seed).  Timings are wall clock on a shared machine: expect noise.
+Vassilev et al. 2001).  Timings are wall clock on a shared machine: expect noise.
 
     .venv/bin/python scripts/bench_body_collision.py [--n 10000 40000]
         [--sizes 128 256 512 1024] [--reps 7] [--axis 1]

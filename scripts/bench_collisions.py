@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Collision detection and response (CD&R) against the rest of the step:
-the columns of seed 002 Table 1, for the bundled collision scenes at
+the columns of Vassilev et al. 2001, Table 1, for the bundled collision scenes at
 several resolutions, and BVH against image-space on the same body.
 
 Each case runs a scene through the public command

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Work stealing in the collision traversal: load balance and phase time
-(distcloth/parallel/steal.py, seed 000 Part 1 §5.8.2).
+(distcloth/parallel/steal.py, EG07 tutorial, Part 1 §5.8.2).
 
 Scenes (frozen snapshots of the 0.5 m x 2 m ribbon of configs/ribbon.yaml,
 41 x 101 = 4141 vertices, 8000 triangles, thickness 4 mm, self-collision):
@@ -132,7 +132,7 @@ def worker(args) -> None:
                                                      opts["chunk"])
             rows = []
             for rep in range(args.reps + 1):
-                comm.barrier()
+                comm.synchronize()
                 t0 = time.perf_counter()
                 det.candidates(xx, xx, THICK)
                 phase = time.perf_counter() - t0

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Time per implicit step and its split, for square cloths of ~10k, 100k, 400k vertices.
 
-Seed 004's material (0.1 kg/m^2, 10 N/m) on a 0.5 m square pinned along one
-edge, backward Euler with 20 ms steps.  Every solver is compared at the same
+The material of Volino and Magnenat-Thalmann 2007, Fig. 4 (0.1 kg/m^2,
+10 N/m) on a 0.5 m square pinned along one edge, backward Euler with 20 ms
+steps.  Every solver is compared at the same
 true relative residual (ksp_rtol 1e-5 with -ksp_norm_type unpreconditioned).
 
     .venv/bin/python scripts/bench_step.py                  # the full table (slow: ~20 min)
@@ -28,18 +29,20 @@ from distcloth.linalg.presets import PRECONDITIONERS
 
 ROOT = Path(__file__).resolve().parents[1]
 
-def _cg(name):
+def _cg(name, **linear_system):
     """CG with one of distcloth's named preconditioners (distcloth/linalg/presets.py,
-    where the AMG settings tuned on the 100k case live)."""
+    where the AMG settings tuned on the 100k case live): the scene's solver: and
+    linear_system: sections."""
     options, mat_type = PRECONDITIONERS[name]
-    return {"ksp_type": "cg", **options}, mat_type
+    return {"ksp_type": "cg", **options}, {"mat_type": mat_type, **linear_system}
 
 
 SOLVERS = {"bjacobi+sgs": _cg("bjacobi_sgs"), "gamg": _cg("gamg"), "hypre": _cg("hypre")}
 # not in the default sweep: GAMG rebuilt only every 5th solve and reused in between
 EXTRA_SOLVERS = {
-    "gamg-rebuild5": ({**SOLVERS["gamg"][0], "pc_rebuild_every": 5}, "aij"),
-    # seed 000 §5.7: the reference preconditioner with a float32 matrix (numba, Python PC)
+    "gamg-rebuild5": _cg("gamg", pc_rebuild_every=5),
+    # EG07 tutorial, Part 1 §5.7: the reference preconditioner with a float32 matrix
+    # (numba, Python PC)
     "sgs32": _cg("sgs32"),
 }
 
@@ -53,9 +56,8 @@ def worker(args):
     from distcloth.simulation import Simulation
     comm = Comm()
     side = int(round(math.sqrt(args.size)))
-    opts, mat_type = {**SOLVERS, **EXTRA_SOLVERS}[args.solver]
-    solver = dict(opts, ksp_rtol=1e-5, ksp_norm_type="unpreconditioned", mat_type=mat_type,
-                  warm_start=args.warm, ksp_max_it=5000)
+    opts, linear_system = {**SOLVERS, **EXTRA_SOLVERS}[args.solver]
+    solver = dict(opts, ksp_rtol=1e-5, ksp_norm_type="unpreconditioned", ksp_max_it=5000)
     material = {"density": 0.1, "stretch": 10.0, "shear": 1.0, "bending": 1e-6}
     if args.bending is not None:     # the FE membrane with the chosen bending model
         material = {"model": "fem", "density": 0.1, "stretch": 10.0, "bending": 1e-6,
@@ -69,6 +71,7 @@ def worker(args):
         "effects": ["gravity", "membrane", "bending"],
         "time": {"end": 10.0, "step": 0.02},
         "solver": solver,
+        "linear_system": dict(linear_system, warm_start=args.warm),
         "output": {"file": "unused.h5", "every": 10.0, "preview": False},
     }
     cfg = config_from_dict(raw, str(ROOT), "bench")
@@ -80,7 +83,7 @@ def worker(args):
     for _ in range(args.warmup):
         sim.step()
     sim.pipeline.take_step_counters()
-    comm.barrier()
+    comm.synchronize()
     its, res = [], []
     split = {"forces": 0.0, "assembly": 0.0, "solve": 0.0, "rest": 0.0}
     t0 = time.perf_counter()
@@ -96,7 +99,7 @@ def worker(args):
         split["rest"] += wall - f - times["assembly"] - times["solve"]
         its.append(d["ksp_iterations"])
         res.append(d["ksp_residual"])
-    comm.barrier()
+    comm.synchronize()
     total = time.perf_counter() - t0
     # the slowest rank sets the pace: report each split's max over ranks
     import numpy as np

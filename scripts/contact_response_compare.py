@@ -1,14 +1,17 @@
 #!/usr/bin/env python3
 """Contact constraints in the implicit solve against impulses after it.
 
-Issue 4 asks to choose between contacts entering the solve as Baraff-Witkin
-constraints (what distcloth does for distance-field colliders) and
-post-solve impulses, to measure and to say why.  Both variants here share
-everything but the contact treatment:
+Body contact can enter the solve as Baraff-Witkin constraints (what
+distcloth does for distance-field colliders) or be answered by impulses
+after the solve; this script measures both (the choice and its reasons:
+docs/collisions.md).  Both variants here share everything but the contact
+treatment:
 
-* ``constraints``: the shipped pipeline (distcloth/collision_stages.py):
+* ``constraints``: the shipped pipeline (distcloth/collision/contact.py):
   predicted contacts constrain the normal velocity inside the solve, missed
-  ones trigger a re-solve, Coulomb friction and a position fail-safe after.
+  ones trigger a re-solve; Coulomb friction is a force of the solve
+  (implicit schemes; after it for explicit ones), and a position fail-safe
+  follows the solve.
 * ``impulses``: no contact in the solve; after it, every vertex within d of
   a collider gets the inelastic normal impulse that cancels its approach,
   Coulomb friction bounded by mu times that impulse (Bridson et al. 2002
@@ -39,15 +42,18 @@ G = 9.81
 
 def use_impulses(sim):
     """Swap the sim's contact treatment for post-solve impulses."""
+    from distcloth.collision.contact import ContactReport, ContactResponse
     from distcloth.collision.response import Contacts, friction
-    col = sim.collisions
-    col.bodies = lambda t, h, missed=None: Contacts.none()
-    col.missed_contacts = lambda result, h, missed: None
+    col = sim.contact
+    stages = sim.pipeline.stages
+    stages["collision:bodies"].fn = lambda state, h, missed=None: Contacts.none()
+    col.missed_contacts = lambda contacts, x_end, t_end, missed: None
 
-    def response(result, h):
+    def response(state, contacts, result, h):
         n = sim.n_owned
         x, v = result.x.copy(), result.v.copy()
-        phis, normals, vels, offs = col.query(x, sim.time + h, col.d_max)
+        t1 = state.t + h
+        phis, normals, vels, offs = col.query(x, t1, col.d_max)
         free = ~col.never_contact[:n]
         pen = float(np.max((offs - phis)[:, free], initial=-np.inf))
         count = 0
@@ -58,16 +64,15 @@ def use_impulses(sim):
             nrm, vb = normals[j][inside], vels[j][inside]
             dvn = np.maximum(-np.einsum("ni,ni->n", v[inside] - vb, nrm), 0.0)
             vn = v[inside] + dvn[:, None] * nrm
-            vf = friction(vn, vb, nrm, np.full(dvn.size, c[1]), dvn)
+            vf = friction(vn, vb, nrm, np.full(dvn.size, c.friction), dvn)
             x[inside] += h * (vf - v[inside])        # backward Euler: x = x0 + h v
             v[inside] = vf
-            ph, nr, _ = c[0](x[inside], sim.time + h, np.inf)
+            ph, nr, _ = c.query(x[inside], t1, np.inf)
             x[inside] += np.maximum(offs[j][inside] - ph, 0.0)[:, None] * nr
             count += int(inside.sum())
-        col.diag.update(contacts=count, max_penetration=pen, projected_vertices=count)
-        result.x, result.v = x, v
-        return result
-    col.response = response
+        return ContactResponse(x, v, None, ContactReport(contacts=count, max_penetration=pen,
+                                                         projected_vertices=count))
+    stages["collision:response"].fn = response
 
 
 def drop(variant):

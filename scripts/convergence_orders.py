@@ -52,7 +52,7 @@ def final(integrator, h, newton):
     sim.prepare()
     for _ in range(int(round(T / h))):
         sim.step()
-    x = sim.x[sim.layout.owned_input.tolist().index(1)] if 1 in sim.layout.owned_input else None
+    x = sim.state.x[sim.layout.owned_input.tolist().index(1)] if 1 in sim.layout.owned_input else None
     sim.destroy()
     return x
 

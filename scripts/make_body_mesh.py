@@ -1,6 +1,6 @@
 """Generate configs/meshes/torso.obj: a closed mannequin-like torso for the
-"cloth dropped on a static mesh body" scenes (seed 002 §4 drapes cloth on a
-body; this is a stand-in body, not a scan).
+"cloth dropped on a static mesh body" scenes (Vassilev et al. 2001 §4 drape cloth on
+a body; this is a stand-in body, not a scan).
 
 Construction (no unions, so watertight by construction): a stack of
 elliptical rings z -> (semi-axis a(z) across the shoulders along x,

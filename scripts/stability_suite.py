@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The full stability suite (issue 6): every case at full size (the long run
+"""The full stability suite: every case at full size (the long run
 10,000 steps) x every integrator, under the settings below, on 2 MPI ranks;
 writes docs/stability.md (tables, criteria, a paragraph per case, the
 machine) and docs/stability.csv (one row per variant).

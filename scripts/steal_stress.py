@@ -78,7 +78,6 @@ def serial(forest, tests):
 
 
 def main(argv=None) -> int:
-    from mpi4py import MPI
     from distcloth.parallel.comm import Comm
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=1000, help="number of problems")
@@ -101,9 +100,9 @@ def main(argv=None) -> int:
             print(f"[rank {rank}] DEADLOCK problem seed {seed} {kw}: {e}", flush=True)
             fails["deadlocks"] += 1
             time.sleep(3.0)                  # let the other ranks' watchdogs report too
-            comm.comm.Abort(3)
+            comm.abort(3)
         faulthandler.cancel_dump_traceback_later()
-        gathered = comm.comm.gather((rows, stats), root=0)
+        gathered = comm.gather_objects((rows, stats))
         if rank != 0:
             continue
         ref, ref_tests = serial(forest, tests)
@@ -142,7 +141,7 @@ def main(argv=None) -> int:
               + f" | tests {totals['tests']}, tasks created {totals['created']}, "
               f"stolen {totals['steals']}, refused {totals['refused']}, "
               f"messages {totals['msgs']} -> {'OK' if ok else 'FAILED'}", flush=True)
-    ok = comm.bcast(ok)
+    ok = comm.broadcast(ok)
     return 0 if ok else 1
 
 

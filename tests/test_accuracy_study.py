@@ -102,7 +102,7 @@ def test_free_fall_errors_equal_the_analytic_error(dcomm, shared_tmp):
             res = read_result(o.path)
             m = metrics.compare(res, exact_free_fall(res["time"]), drape=False)
             rows.append((dict(o.variant.settings), m))
-    rows = dcomm.bcast(rows)
+    rows = dcomm.broadcast(rows)
     assert len(rows) == 8
     for settings, m in rows:
         h = float(settings["time.step"])
@@ -134,7 +134,7 @@ def _file_times(outcomes):
 def resumed(dcomm, tmp_path_factory):
     """A sweep interrupted after its first variant, then run whole; and the same
     whole sweep run afresh elsewhere."""
-    base = dcomm.bcast(str(tmp_path_factory.mktemp("resume")))
+    base = dcomm.broadcast(str(tmp_path_factory.mktemp("resume")))
     raw = square_scene(effects=("gravity", "membrane", "bending"), end=0.1, every=0.02, resolution=7)
     first = sweep_in(raw, ["time.step=0.02"], f"{base}/a", dcomm, noise_floor=False)
     before = _file_times(first)
@@ -162,7 +162,7 @@ def test_rerun_reproduces_errors_exactly(resumed, dcomm):
         b, _ = analyse(fresh)
         values = [[r.get(k) for k in metrics.SCALAR_METRICS] for r in a], \
                  [[r.get(k) for k in metrics.SCALAR_METRICS] for r in b]
-    a, b = dcomm.bcast(values)
+    a, b = dcomm.broadcast(values)
     assert len(a) == 4
     # same rank count, same partition, same reduction order: bit for bit
     assert repr(a) == repr(b)
@@ -282,7 +282,7 @@ def test_every_pc_value_maps_to_solver_options_that_run(dcomm, shared_tmp):
     if dcomm.rank == 0:
         from distcloth.io.h5read import read_attrs
         solvers = {o.variant.label(): read_attrs(o.path)["solver"] for o in out}
-    solvers = dcomm.bcast(solvers)
+    solvers = dcomm.broadcast(solvers)
     for pc in ("jacobi", "gamg", "hypre"):
         assert pc in solvers[f"pc={pc}"]
 

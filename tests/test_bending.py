@@ -1,12 +1,10 @@
-"""Hinge bending (seed 000 Part 1 §4.3): topology, invariances, derivatives, calibration.
+"""Hinge bending (EG07 tutorial, Part 1 §4.3): topology, invariances, derivatives, calibration.
 
 Finite differences: central differences with step EPS = 1e-6 on O(1)
 coordinates have truncation error O(EPS^2 |f'''|) ~ 1e-12 and round-off
 O(1e-16 |f| / EPS) ~ 1e-10 relative, so RTOL = 1e-6 relative to the largest
 entry is a real check (a wrong term is O(1) relative).
 """
-import time
-
 import numpy as np
 import pytest
 
@@ -368,35 +366,3 @@ def test_energy_weight_scales_energy_not_forces():
         assert np.array_equal(fa, fb)
         assert np.isclose(ib["elastic_energy"], 0.25 * ia["elastic_energy"], rtol=1e-13)
 
-
-# --------------------------------------------------------------------------
-# timing (reported, not asserted): run with -s to see it
-# --------------------------------------------------------------------------
-
-def test_kernel_timings_300k_hinges():
-    x, tris = grid_mesh(320, 320)            # 3*320^2 - 2*320 = 306560 hinges
-    hg = hinges(tris)
-    n = x.shape[0]
-    y = roll(x, 0.7, 0) + 1e-3 * np.random.default_rng(0).normal(size=x.shape)
-    pattern = BlockPattern(n, n, [hg])
-    w = np.ones((n, 3))
-    lines = []
-    for term in make_terms(hg, x) + (DihedralBendingTerm(hg, x, 1.0, 1.0, hessian="exact"),):
-        term.bind(pattern)
-        data = pattern.new_values()
-        f = np.zeros_like(y)
-        term.evaluate(y, y, f, True)                     # compile / warm up
-        term.stiffness_product(w, f)
-        term.add_to_system(data, 1.0, 0.0)
-        for label, call in (("evaluate", lambda: term.evaluate(y, y, f, True)),
-                            ("stiffness_product", lambda: term.stiffness_product(w, f)),
-                            ("add_to_system", lambda: term.add_to_system(data, 1.0, 0.0)),
-                            ("energy", lambda: term.energy(y))):
-            t0 = time.perf_counter()
-            for _ in range(3):
-                call()
-            tag = type(term).__name__ + {"exact": "[exact]"}.get(getattr(term, "hessian", ""), "")
-            lines.append(f"{tag}.{label}: "
-                         f"{(time.perf_counter() - t0) / 3 * 1e3:.1f} ms / {hg.shape[0]} hinges")
-        assert np.isfinite(f).all()
-    print("\n" + "\n".join(lines))

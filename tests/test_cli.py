@@ -1,7 +1,6 @@
 """The command line end to end, under its own mpiexec (rank 0 of the test job
 launches it; see conftest.run_cli)."""
 import math
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -135,7 +134,7 @@ def test_explicit_step_refused_unless_forced(tmp_path):
     p = run_cli(["run", *args], ranks=2)
     assert p.returncode == 2 and "time.step" in p.stderr and "Eq. 4" not in p.stderr.split("config error")[-1]
     p = run_cli(["run", *args, "--force"], ranks=2)
-    assert "seed 002 Eq. 4" in p.stderr
+    assert "Eq. 4" in p.stderr       # Vassilev et al. 2001's bound, printed beside the limit
 
 
 def test_output_reads_back_and_xdmf_matches(tmp_path):
@@ -203,3 +202,16 @@ def test_explicit_limit_covers_continuum_membrane(tmp_path):
     p = run_cli(["check", SQUARE, "--set", "time.integrator=rk4",
                  "--set", "cloth.0.material={model: fem, density: 0.1, E_weft: 10.0}"], ranks=2)
     assert p.returncode == 2 and "rk4 is unstable above" in p.stderr, p.stderr
+
+
+def test_own_solver_settings_on_the_command_line(tmp_path):
+    """-distcloth_mat_type and the other linear_system: keys are scene settings,
+    checked like --set and never left to PETSc (which would call them unused)."""
+    p = run_cli(["check", SQUARE, "-distcloth_mat_type", "dense"], ranks=2, timeout=120)
+    lines = [ln for ln in p.stderr.splitlines() if ln.startswith("distcloth: config error")]
+    assert p.returncode == 2 and lines == [
+        "distcloth: config error: command line -distcloth_mat_type: 'dense' — one of baij | aij"]
+    p = run_cli(["check", SQUARE, "-distcloth_mat_type", "aij", "-distcloth_warm_start", "true",
+                 "-distcloth_pc_rebuild_every", "3"], ranks=2, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert "aij matrix, " in p.stderr and "warm start" in p.stderr and "every 3 solves" in p.stderr

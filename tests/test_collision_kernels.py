@@ -13,6 +13,7 @@ from distcloth.collision import ccd as C
 from distcloth.collision import proximity as P
 from distcloth.collision import traverse as T
 from distcloth.collision import tritri as TT
+from serial_oracles import count_self_intersections, refit_boxes
 
 
 # ---------------------------------------------------------------- helpers
@@ -150,7 +151,7 @@ def test_two_tree_traversal_matches_brute_force(kind):
 
 
 def test_stack_split_from_bottom_is_lossless():
-    """Seed 000 Part 1 §5.8.1: tests taken from the bottom of the stack and
+    """EG07 tutorial, Part 1 §5.8.1: tests taken from the bottom of the stack and
     run elsewhere, the union equals the uninterrupted traversal exactly."""
     rng = np.random.default_rng(3)
     x, tri = crumpled_grid(rng)
@@ -190,7 +191,7 @@ def test_take_bottom_rows():
 
 
 def test_combined_top_tree_equals_single_bvh():
-    """Seed 000 Part 1 §5.8.2: per-rank sub-BVHs, a top tree over their
+    """EG07 tutorial, Part 1 §5.8.2: per-rank sub-BVHs, a top tree over their
     root boxes; grafted, or used to seed sub-tree root tests, the
     candidates equal those of one BVH over the whole mesh."""
     rng = np.random.default_rng(4)
@@ -219,7 +220,7 @@ def test_combined_top_tree_equals_single_bvh():
     # task form: self traversal of the top tree gives the sub-tree pairs to test
     subs = [B.refit(s, c, x2, pad=0.01) for s, c in zip(subs, chunks)]
     roots = np.array([s.root_box() for s in subs])
-    B.refit_boxes(top, roots[:, 0], roots[:, 1])
+    refit_boxes(top, roots[:, 0], roots[:, 1])
     sub_pairs = T.all_pairs((top,), [[0, 0, 0, 0]])[:, [1, 3]]
     live = np.unique(top.order)
     tests = [[s, 0, s, 0] for s in live] + [[i, 0, j, 0] for i, j in sub_pairs]
@@ -578,11 +579,11 @@ def test_tritri_shared_vertex_rule():
     v, a, b = np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     x = lambda *pts: np.array([v, a, b, *pts])
     tri = np.array([[0, 1, 2], [0, 3, 4]])
-    assert TT.count_self_intersections(x([0.2, 0.2, 1], [0.2, 0.2, -1]), tri) == 1   # pierces
-    assert TT.count_self_intersections(x([1, 1, 1], [2, -1, 1]), tri) == 0          # only v
-    assert TT.count_self_intersections(x([0.3, 1, 0], [1, 0.3, 0]), tri) == 1       # coplanar overlap
-    assert TT.count_self_intersections(x([-1, 0.1, 0], [-1, -1, 0]), tri) == 0      # coplanar, apart
-    assert TT.count_self_intersections(x([0, 1, 0.5], [1, 0, 0.5]), np.array([[0, 1, 2], [0, 1, 3]])) == 0
+    assert count_self_intersections(x([0.2, 0.2, 1], [0.2, 0.2, -1]), tri) == 1   # pierces
+    assert count_self_intersections(x([1, 1, 1], [2, -1, 1]), tri) == 0          # only v
+    assert count_self_intersections(x([0.3, 1, 0], [1, 0.3, 0]), tri) == 1       # coplanar overlap
+    assert count_self_intersections(x([-1, 0.1, 0], [-1, -1, 0]), tri) == 0      # coplanar, apart
+    assert count_self_intersections(x([0, 1, 0.5], [1, 0, 0.5]), np.array([[0, 1, 2], [0, 1, 3]])) == 0
 
 
 def _mesh_oracle(x, tri):
@@ -606,7 +607,7 @@ def _mesh_oracle(x, tri):
 def test_count_self_intersections_mesh():
     rng = np.random.default_rng(13)
     x, tri = grid_mesh(10, 10, h=0.1)
-    assert TT.count_self_intersections(x, tri) == 0               # flat sheet
+    assert count_self_intersections(x, tri) == 0               # flat sheet
     # fold: the right half turned over the left one about x = 0.5 (175 degrees)
     # and pushed down, so it passes through the left half along a line
     xf = x.copy()

@@ -71,7 +71,7 @@ def distributed(comm_world=None):
 
 
 def test_pairs_equal_serial_brute_force():
-    from distcloth.collision.tritri import count_self_intersections
+    from serial_oracles import count_self_intersections
     model, det, x, vf, ee, hits = distributed()
     g = det.geometry
     bvf, bee = brute_force(x, g.tri, g.edges)

@@ -8,9 +8,9 @@ import yaml
 
 from distcloth.config import (ConfigError, SceneConfig, config_from_dict, format_config_error,
                               load_config)
-from distcloth.config.load import apply_overrides
-from distcloth.config.schema import (ClothSpec, GridSpec, MaterialSpec, MeshSpec, OutputSpec,
-                                     PinSpec, TimeSpec)
+from distcloth.config.load import apply_overrides, own_option_names
+from distcloth.config.schema import (ClothSpec, GridSpec, LinearSystemSpec, MaterialSpec, MeshSpec,
+                                     OutputSpec, PinSpec, TimeSpec)
 
 FULL_SCENE = """\
 scene: hanging_square
@@ -35,7 +35,8 @@ gravity: [0, 0, -9.8]
 drag: 0.5
 time: {end: 2.0, step: 1e-2, integrator: symplectic_euler, newton_iterations: 3,
        newton_tolerance: 1.0e-6}
-solver: {ksp_type: gmres, ksp_rtol: 1e-8, ksp_max_it: 50, ksp_monitor: true, mat_type: aij}
+solver: {ksp_type: gmres, ksp_rtol: 1e-8, ksp_max_it: 50, ksp_monitor: true}
+linear_system: {mat_type: aij}
 output: {file: out/./hanging.h5, every: 0.1, preview: false}
 """
 
@@ -99,7 +100,7 @@ def test_full_scene_gives_the_written_values(scene_dir):
         time=TimeSpec(2.0, 0.01, "symplectic_euler", 3, 1.0e-6),
         solver=(("ksp_type", "gmres"), ("pc_type", "bjacobi"), ("sub_pc_type", "sor"),
                 ("ksp_rtol", 1e-8), ("ksp_max_it", 50), ("ksp_monitor", True)),
-        mat_type="aij",
+        linear_system=LinearSystemSpec(mat_type="aij"),
         output=OutputSpec(file="out/hanging.h5", every=0.1, preview=False),
     )
     assert dataclasses.replace(config, source_text="") == expected
@@ -171,7 +172,7 @@ ERRORS = [
     ("cloth.0.material", {"model": "fem", "E_weft": 100, "E_warp": 50, "nu_weft": 0.3,
                           "nu_warp": 0.3},
      "cloth.0.material.nu_warp: 0.3 — nu_warp = nu_weft * E_warp / E_weft = 0.15 (otherwise "
-     "the stiffness of seed 000 Eq. 22 is not symmetric)"),
+     "the stiffness of the EG07 tutorial, Part 1 Eq. 22 is not symmetric)"),
     ("cloth.0.material", {"model": "fem", "E_weft": 100, "E_warp": 100, "nu_weft": 1.2},
      "cloth.0.material.nu_warp: 1.2 — nu_weft * nu_warp < 1"),
     ("cloth.0.material", {"E_weft": 100}, "cloth.0.material.E_weft: 100 — only with model: fem "
@@ -180,7 +181,7 @@ ERRORS = [
      "cloth.0.material.bending_model: 'flexion' — dihedral, isometric, dihedral_shell or isometric_shell with model: fem"),
     ("cloth.0.material", {"stretch": True},
      "cloth.0.material.stretch: true — a finite number > 0"),
-    ("solver", {"pc_type": "gamg"}, "solver.pc_type: 'gamg' — gamg with solver.mat_type: aij "
+    ("solver", {"pc_type": "gamg"}, "solver.pc_type: 'gamg' — gamg with linear_system.mat_type: aij "
                                      "(PETSc's GAMG cannot build its graph from the default BAIJ "
                                      "matrix)"),
     ("time", {"max_energy_gain": 0}, "time.max_energy_gain: 0 — a finite number > 0"),
@@ -194,8 +195,8 @@ ERRORS = [
     ("time", {"stepp": 0.01},
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
-                      "gravity, drag, time, solver, output, drape, colliders, "
-                      "work_stealing"),
+                      "gravity, drag, time, solver, linear_system, output, drape, "
+                      "colliders, work_stealing"),
     ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
     ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
     ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
@@ -249,7 +250,16 @@ ERRORS = [
                                    "letters, digits and _, starting with a letter"),
     ("solver", {"ksp_type": ["cg"]},
      "solver.ksp_type: ['cg'] — a string, a finite number or a boolean"),
-    ("solver", {"mat_type": "dense"}, "solver.mat_type: 'dense' — one of baij | aij"),
+    ("solver", {"mat_type": "aij"}, "solver.mat_type: 'aij' — moved: write linear_system.mat_type"),
+    ("solver", {"warm_start": True}, "solver.warm_start: true — moved: write linear_system.warm_start"),
+    ("solver", {"pc_rebuild_every": 2},
+     "solver.pc_rebuild_every: 2 — moved: write linear_system.pc_rebuild_every"),
+    ("linear_system", {"mat_type": "dense"}, "linear_system.mat_type: 'dense' — one of baij | aij"),
+    ("linear_system", {"warm_start": 1}, "linear_system.warm_start: 1 — true or false"),
+    ("linear_system", {"pc_rebuild_every": 0},
+     "linear_system.pc_rebuild_every: 0 — an integer >= 1"),
+    ("linear_system", {"ksp_rtol": 1e-8}, "linear_system.ksp_rtol: 1e-08 — unknown key; allowed "
+                                          "keys: mat_type, warm_start, pc_rebuild_every"),
     ("work_stealing", {"enabled": "yes"}, "work_stealing.enabled: 'yes' — true or false"),
     ("work_stealing", {"b": 0.5}, "work_stealing.b: 0.5 — a finite number >= 1"),
     ("work_stealing", {"chunk": 0}, "work_stealing.chunk: 0 — an integer >= 1"),
@@ -295,8 +305,8 @@ TIME_ALLOWED = f"no such key; allowed under time: {TIME_KEYS}"
 OVERRIDE_ERRORS = [
     ("time.stepp=0.1", f"time.stepp: 0.1 — {TIME_ALLOWED}"),
     ("nosuch.key=1", "nosuch.key: 1 — no such key; allowed under the top level: scene, cloth, "
-                     "effects, gravity, drag, time, solver, output, drape, colliders, "
-                     "work_stealing"),
+                     "effects, gravity, drag, time, solver, linear_system, output, drape, "
+                     "colliders, work_stealing"),
     ("cloth.2.name=x", "cloth.2.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.first.name=x", "cloth.first.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.0.pins.0.edge=top", "cloth.0.pins.0.edge: 'top' — cloth.0.pins is not in the "
@@ -326,7 +336,7 @@ def test_bad_overrides_name_their_path(scene_dir, override, expected):
 
 
 NOT_A_MAPPING = ("null — a YAML mapping with keys scene, cloth, effects, gravity, drag, time, "
-                 "solver, output, drape, colliders, work_stealing")
+                 "solver, linear_system, output, drape, colliders, work_stealing")
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -471,3 +481,44 @@ def test_cloth_thickness_must_not_be_negative(scene_dir):
     raw = set_path(base_scene(), "cloth.0.thickness", -0.001)
     assert error_line(raw, scene_dir) == ("distcloth: config error: cloth.0.thickness: -0.001"
                                           " — a finite number >= 0")
+
+
+# --- linear_system: distcloth's own solver settings, also on the command line -------
+
+def test_linear_system_is_read_and_gamg_takes_aij(scene_dir):
+    raw = base_scene()
+    raw["solver"] = {"pc_type": "gamg"}
+    raw["linear_system"] = {"mat_type": "aij", "warm_start": True, "pc_rebuild_every": 4}
+    config = config_from_dict(raw, str(scene_dir), "x.yaml")
+    assert config.linear_system == LinearSystemSpec("aij", True, 4)
+    assert "mat_type" not in config.solver_options and config.solver_options["pc_type"] == "gamg"
+    assert config_from_dict(base_scene(), str(scene_dir), "x.yaml").linear_system == \
+        LinearSystemSpec("baij", False, 1)
+
+
+def test_command_line_options_set_linear_system_and_win(scene_dir):
+    assert own_option_names() == ("mat_type", "warm_start", "pc_rebuild_every")
+    config = load_config(str(scene_dir / "hanging.yaml"), ["linear_system.pc_rebuild_every=2"],
+                         {"warm_start": "true", "pc_rebuild_every": "3"})
+    # the scene's mat_type stays; the command line wins over the file and --set
+    assert config.linear_system == LinearSystemSpec("aij", True, 3)
+
+
+@pytest.mark.parametrize("options, expected", [
+    ({"mat_type": "dense"}, "command line -distcloth_mat_type: 'dense' — one of baij | aij"),
+    ({"warm_start": "maybe"}, "command line -distcloth_warm_start: 'maybe' — true or false"),
+    ({"pc_rebuild_every": "0"}, "command line -distcloth_pc_rebuild_every: 0 — an integer >= 1"),
+    ({"mat_type": "[1"}, "command line -distcloth_mat_type: '[1' — a YAML value (expected ',' "
+                         "or ']', but got '<stream end>')"),
+])
+def test_a_bad_command_line_option_is_named(scene_dir, options, expected):
+    with pytest.raises(ConfigError) as caught:
+        load_config(str(scene_dir / "hanging.yaml"), (), options)
+    assert format_config_error(caught.value) == "distcloth: config error: " + expected
+
+
+def test_a_bad_scene_value_is_not_blamed_on_the_command_line(scene_dir):
+    with pytest.raises(ConfigError) as caught:
+        load_config(str(scene_dir / "hanging.yaml"), ["linear_system.mat_type=dense"],
+                    {"warm_start": "true"})
+    assert caught.value.key == "linear_system.mat_type"

@@ -1,6 +1,8 @@
-"""Draping (seed 004): every method reaches the same rest state, and
-stop-and-go needs far fewer iterations than plain dynamics (the seed reports
-100 against ~400 on its hanging square; here 73 against 955 at 21 x 21)."""
+"""Draping (Volino and Magnenat-Thalmann 2007): every method reaches the same
+rest state, and stop-and-go needs far fewer iterations than plain dynamics
+(the paper reports 100 against ~400 on its wrinkle relaxation; here 102
+against 1411 iterations on a 9 x 9 square hanging along one edge, measured
+on one rank)."""
 import h5py
 import numpy as np
 import pytest
@@ -16,7 +18,7 @@ def drape(method, tol=1e-4):
     raw["drape"] = {"method": method, "tolerance": tol, "max_iterations": 3000}
     sim = make_sim(raw)
     relax = Relaxation(sim, sim.cfg.drape)
-    start = sum(relax.energies())
+    start = sum(sim.potential_energies())
     for k in range(1, 3001):
         diag = relax.iterate()
         if drape_converged(diag, sim.cfg.drape):

@@ -1,9 +1,8 @@
 """Bridson-style collision response (distcloth.collision.impulses).
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §2.3 / Bridson, Fedkiw and
-Anderson 2002: repulsion at x0 (§7.2, friction §7.3), CCD impulses (§7.1)
-and rigid impact zones (§7.4) on one index space of cloth vertices and
-kinematic (inv_mass 0) collider vertices.  Serial numpy tests: every MPI
+EG07 tutorial, Part 1 §2.3 / Bridson et al. 2002: repulsion at x0 (§7.2,
+friction §7.3), CCD impulses (§7.1) and rigid impact zones (§7.4) on one
+index space of cloth vertices and kinematic (inv_mass 0) collider vertices.  Serial numpy tests: every MPI
 rank runs them identically."""
 from __future__ import annotations
 
@@ -15,7 +14,7 @@ from distcloth.collision import impulses as I
 from distcloth.collision.ccd import edge_edge_ccd, vertex_face_ccd
 from distcloth.collision.proximity import (edge_edge_contacts, mesh_edges, segment_segment,
                                            vertex_face_contacts)
-from distcloth.collision.tritri import count_self_intersections
+from serial_oracles import count_self_intersections, serial_candidates
 
 
 # ---------------------------------------------------------------- helpers
@@ -70,7 +69,7 @@ def test_fast_vertex_stops_at_static_panel(xy):
     th, h = 0.01, 0.1
     u = np.zeros((5, 3))
     u[4] = (0.0, 0.0, -10.0)                     # 1.0 per step = 100 thicknesses, through the panel
-    finder = I.serial_candidates(ptri, edges, th)
+    finder = serial_candidates(ptri, edges, th)
     un, st = I.resolve(x0, u, h, inv, ptri, edges, th, 0.0, finder)
     x1 = x0 + h * un
     assert st["remaining"] == 0 and st["ccd_hits"][0] >= 1
@@ -91,7 +90,7 @@ def test_edge_crossing_kinematic_edge_is_stopped():
     tri = np.zeros((0, 3), np.int64)
     u = np.array([[0.0, 0.0, 0.2], [0.0, 0.0, 0.2], [0.5, 0.0, -6.0], [0.0, 0.3, -9.0]])
     th, h = 0.01, 0.1
-    finder = I.serial_candidates(tri, edges, th)
+    finder = serial_candidates(tri, edges, th)
     pairs = np.array([[0, 1]])
     assert np.isfinite(edge_edge_ccd(x0, x0 + h * u, edges, pairs).t[0])   # crosses unresolved
     un, st = I.resolve(x0, u, h, inv, tri, edges, th, 0.0, finder)
@@ -121,7 +120,7 @@ def test_head_on_triangles_conserve_momentum():
     x0, tri, edges, u, inv = _two_triangles(rng)
     m = 1.0 / inv
     th, h = 0.01, 0.1
-    finder = I.serial_candidates(tri, edges, th)
+    finder = serial_candidates(tri, edges, th)
     assert n_hits(x0, x0 + h * u, tri, edges, inv, finder, 1e-5) > 0     # they pass through
     p0, L0 = momentum(m, u), angular(m, x0, u)
     # impulses only (no fail-safe)
@@ -183,7 +182,7 @@ def _violent_field():
     edges = mesh_edges(tri)
     u = smooth_field(np.random.default_rng(0), amp=3.0)(x0)
     th = 0.01
-    return x0, tri, edges, np.ones(len(x0)), u, th, 0.05, I.serial_candidates(tri, edges, th)
+    return x0, tri, edges, np.ones(len(x0)), u, th, 0.05, serial_candidates(tri, edges, th)
 
 
 def test_order_independent_and_reproducible():
@@ -212,7 +211,7 @@ def test_reused_candidates_change_nothing():
     x0, tri, edges, inv, u, th, h, base = _violent_field()
 
     def detect(a, b, pad):
-        return I.serial_candidates(tri, edges, pad)(a, b)
+        return serial_candidates(tri, edges, pad)(a, b)
 
     ua, sa = I.resolve(x0, u, h, inv, tri, edges, th, 0.3, base)
     assert sa["ccd_hits"][0] > 100 and len(sa["ccd_hits"]) > 2
@@ -256,7 +255,7 @@ def test_crumpling_cloth_stays_intersection_free(collider):
         tri = np.vstack([tri, nc + ptri])
         inv = np.r_[inv, np.zeros(4)]
     edges = mesh_edges(tri)
-    finder = I.serial_candidates(tri, edges, th)
+    finder = serial_candidates(tri, edges, th)
 
     def drive(field, xs):
         u = np.zeros_like(xs)

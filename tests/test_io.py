@@ -22,6 +22,7 @@ from mpi4py import MPI
 
 from distcloth.io import CollectiveError, ResultWriter, check_xdmf, read_result, write_previews
 from distcloth.io import h5writer
+from distcloth.parallel.comm import Comm
 
 COMM = MPI.COMM_WORLD
 RANK, SIZE = COMM.rank, COMM.size
@@ -79,7 +80,7 @@ class Synthetic:
                       "ksp_rtol": 1e-8, "verbose": False, "resolution": [40, 25]}
 
     def writer(self, path, comm=COMM, **kw):
-        return ResultWriter(path, comm, rest_positions=self.rest, triangles=self.triangles,
+        return ResultWriter(path, Comm(comm), rest_positions=self.rest, triangles=self.triangles,
                             owned_input=self.owned, part=self.part, config_text=self.config,
                             attrs=self.attrs, stage_names=STAGES, diagnostic_names=DIAGS, **kw)
 

@@ -5,9 +5,6 @@ coordinates have truncation error O(EPS^2 |f'''|) ~ 1e-12 and round-off
 O(1e-16 |f| / EPS) ~ 1e-10 relative, so agreement to RTOL = 1e-6 relative
 is a real check of exactness (a wrong term would be off by O(1)).
 """
-import itertools
-import time
-
 import numpy as np
 
 from fd import fd_jacobian as _fd_jacobian
@@ -16,8 +13,7 @@ from scipy.linalg import sqrtm
 from scipy.spatial import Delaunay
 
 from distcloth.linalg.pattern import BlockPattern
-from distcloth.physics.membrane_fem import (MembraneFEMTerm, element_hessians,
-                                            orthotropic_plane_stress, uniaxial_modulus)
+from distcloth.physics.membrane_fem import (MembraneFEMTerm, orthotropic_plane_stress, uniaxial_modulus)
 
 EPS = 1e-6
 RTOL = 1e-6
@@ -275,26 +271,3 @@ def test_rest_frame_weft_projection_and_fallback():
     with pytest.raises(ValueError):
         MembraneFEMTerm([[0, 1, 2]], X, None, material(), "neo", [1.0])
 
-
-def test_kernel_timing_200k_triangles(capsys):
-    """Timing on ~200k triangles: reported with -s, not asserted."""
-    P, tris = grid(316, 316, 1.0, 1.0)                 # 199712 triangles
-    X = np.column_stack([P, np.zeros(len(P))])
-    rng = np.random.default_rng(0)
-    n = len(X)
-    lines = []
-    states = {"stretched 2% + noise 3% of edge": 1.02 * X + 1e-4 * rng.normal(size=X.shape),
-              "rough: noise 30% of edge": 1.02 * X + 1e-3 * rng.normal(size=X.shape)}
-    for (label, x), model, project in itertools.product(states.items(), MODELS, (False, True)):
-        term = MembraneFEMTerm(tris, X, None, material(), model, np.ones(len(tris)),
-                               project=project)
-        term.evaluate(x, None, np.zeros((n, 3)), True)      # compile / warm up
-        t0 = time.perf_counter()
-        term.evaluate(x, None, np.zeros((n, 3)), False)
-        t1 = time.perf_counter()
-        term.evaluate(x, None, np.zeros((n, 3)), True)
-        t2 = time.perf_counter()
-        lines.append(f"{label}: {model:9s} project={project!s:5s} ne={len(tris)} "
-                     f"forces {1e3 * (t1 - t0):.1f} ms, forces+hessian {1e3 * (t2 - t1):.1f} ms")
-    with capsys.disabled():
-        print("\n" + "\n".join(lines))

@@ -1,4 +1,4 @@
-"""Mesh colliders and self-collision end to end (distcloth/collision_stages.py).
+"""Mesh colliders and self-collision end to end (distcloth/collision/contact.py).
 
 * A cloth hits a zero-thickness two-triangle panel at 20 m/s, moving 20
   cloth thicknesses per step: no vertex path and no cloth edge ever crosses
@@ -61,7 +61,7 @@ def test_panel_at_20_m_per_s(shared_tmp, comm):
     sim = make_sim(raw, model=model)
     tri_x = np.array([[[-0.1, -0.1, 0], [0.1, -0.1, 0], [0.1, 0.1, 0]],
                       [[-0.1, -0.1, 0], [0.1, 0.1, 0], [-0.1, 0.1, 0]]])
-    edges = sim.collisions.detector.geometry.edges
+    edges = sim.contact.detector.geometry.edges
     edges = edges[edges[:, 1] < model.num_vertices]
     prev = gather_positions(sim)
     for step in range(1, 13):                      # reaches the panel at the 3rd step
@@ -139,10 +139,10 @@ def test_effects_that_are_off_build_nothing():
         colliders=[{"name": "floor", "shape": "plane", "normal": [0, 0, 1], "offset": 0.0}])
     sim = make_sim(raw)
     sim.step()
-    assert sim.collisions.detector is None             # no BVH, no all-gather, no traversal
+    assert sim.contact.detector is None             # no BVH, no all-gather, no traversal
     on = make_sim(grid_scene(effects=["gravity", "membrane", "self_collision"]))
     on.step()
-    assert on.collisions.detector.counters["phases"] >= 2
+    assert on.contact.detector.counters["phases"] >= 2
     assert "collision:bodies" not in on.pipeline.stages   # no collider: no body stage
 
 
@@ -170,7 +170,7 @@ def test_two_runs_write_bitwise_identical_frames(tmp_path):
 def test_mesh_sphere_by_bvh_and_image_space(shared_tmp, comm, method):
     # the drop of test_collisions.py onto a triangulated sphere instead of the
     # analytic one: the scene picks BVH closest points or image-space maps
-    # (seed 002 §4, viewed from above, where the sphere is a height field)
+    # (Vassilev et al. 2001 §4, viewed from above, where the sphere is a height field)
     from meshes import icosphere
     R, d = 0.15, 0.002
     unit, tri = icosphere(3)
@@ -189,14 +189,14 @@ def test_mesh_sphere_by_bvh_and_image_space(shared_tmp, comm, method):
     # its faces; the maps add at most half a pixel diagonal times tan(slope),
     # so image space is held to that where the slope seen from above is below
     # 60 degrees (the cap), and not at the grazing sides, where a single view
-    # cannot resolve the surface (seed 002 §4 uses front and back views of a
+    # cannot resolve the surface (Vassilev et al. 2001 §4 use front and back views of a
     # standing body for that reason); the BVH is held everywhere
     c = (R * unit)[tri]
     n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
     sagitta = R - np.min(np.abs(np.einsum("ij,ij->i", n / np.linalg.norm(n, axis=1)[:, None],
                                            c[:, 0])))
     pixel = 0.0 if method == "bvh" else \
-        0.5 * float(np.hypot(*sim.collisions.image_error_bounds["ball"]))
+        0.5 * float(np.hypot(*sim.contact.image_error_bounds()["ball"]))
     contacts, worst = 0, np.inf
     for _ in range(120):
         diag = sim.step()

@@ -1,4 +1,4 @@
-"""METIS partitioning and the per-rank layout (seed 000 Part 1 §5.4-5.5).
+"""METIS partitioning and the per-rank layout (EG07 tutorial, Part 1 §5.4-5.5).
 
 Pure serial: every test builds the layouts of all ranks of a given size in one
 process and checks them against expectations computed independently from the

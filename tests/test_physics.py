@@ -7,7 +7,7 @@
 import numpy as np
 import pytest
 
-from distcloth.config.load import config_from_dict
+from distcloth.config.load import config_from_dict, own_option_names
 from distcloth.model import STRUCTURAL, Model
 from distcloth.linalg.pattern import BlockPattern
 from distcloth.physics.terms import SpringTerm
@@ -143,7 +143,7 @@ def test_hanging_square_at_rest(material):
     for _ in range(100):   # projected Hessians (compressed corners) make Newton linear
         sim.step()
     n = sim.n_owned
-    f = sim.forces(sim.x, np.zeros_like(sim.v), want_jac=False)[:n]
+    f = sim.ctx.forces(sim.state.x, np.zeros_like(sim.state.v), want_jac=False)[:n]
     pinned = np.zeros(n, bool)
     pinned[sim.pinned_local[sim.pinned_local < n]] = True
     Mg = 9.81 * sim.model.vertex_mass.sum()
@@ -167,8 +167,11 @@ def test_matrix_types_and_preconditioners_agree(solver):
     """BAIJ and AIJ go through the same blocked path: with a tight tolerance
     every solver gives the reference trajectory (bjacobi + SGS on BAIJ)."""
     def run(extra):
-        raw = grid_scene(time={"end": 0.2, "step": 0.02},
-                         solver={"ksp_rtol": 1e-12, "ksp_norm_type": "unpreconditioned", **extra})
+        # distcloth's own keys go to linear_system:, the rest are PETSc options
+        own = {k: v for k, v in extra.items() if k in own_option_names()}
+        petsc = {k: v for k, v in extra.items() if k not in own}
+        raw = grid_scene(time={"end": 0.2, "step": 0.02}, linear_system=own,
+                         solver={"ksp_rtol": 1e-12, "ksp_norm_type": "unpreconditioned", **petsc})
         raw["cloth"][0]["pins"] = [{"edge": "top"}]
         sim = make_sim(raw)
         for _ in range(10):
@@ -185,7 +188,7 @@ def test_matrix_types_and_preconditioners_agree(solver):
 def test_explicit_stability_limit():
     """Gershgorin bounds the true lambda_max(M^-1 K); symplectic Euler is
     stable at the computed limit and blows up just above 2/sqrt(lambda_max).
-    (Seed 002's Eq. 4, printed beside it, uses only the stiffest spring; here,
+    (Eq. 4 of Vassilev et al. 2001, printed beside it, uses only the stiffest spring; here,
     with soft shear springs, it is 0.9x the true limit, so no claim is tested.)"""
     from distcloth.simulation import SimulationError
     raw = grid_scene(effects=["membrane", "bending"],
@@ -207,11 +210,11 @@ def test_explicit_stability_limit():
     h_true = 2.0 / np.sqrt(lam_true)
 
     sim = make_sim(raw, model)
-    limit, seed_bound = sim.explicit_step_limits()
+    limit, eq4_bound = sim.explicit_step_limits()
     sim.destroy()
     assert limit <= 0.9 * h_true * (1 + 1e-12)          # Gershgorin is an upper bound
     assert limit >= 0.3 * h_true                         # ... and not a useless one
-    assert 0 < seed_bound < np.inf
+    assert 0 < eq4_bound < np.inf
 
     def run(h, steps):
         # the energy guard off: near h = 2/omega symplectic Euler's true energy
@@ -254,7 +257,7 @@ def test_adaptive_step_halving_rescues_failed_solves():
     sim = make_sim(adaptive_scene(adaptive=True, max_halvings=4))
     start = gather_positions(sim)
     diags = [sim.step() for _ in range(10)]
-    assert abs(sim.time - 0.2) < 1e-12
+    assert abs(sim.state.t - 0.2) < 1e-12
     assert diags[-1]["rejected_steps"] > 0
     assert min(d["step_size"] for d in diags) <= 0.01
     x = gather_positions(sim)

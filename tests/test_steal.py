@@ -170,7 +170,7 @@ def test_all_work_on_rank0_gets_stolen():
         # rank 0 naps between chunks now and then, so the thieves get their turn
         rows, st = run_tasks(comm, forest, tests, np.zeros(1, np.int64), chunk=64, timeout=60,
                              delay=5e-4, delay_prob=0.2, seed=attempt)
-        allrows = np.concatenate(comm.comm.allgather(rows))
+        allrows = np.concatenate(comm.gather_objects(rows))
         assert allrows.shape[0] == ref.shape[0]           # no duplicate
         assert np.array_equal(canonical(allrows), ref)    # nothing lost
         stolen += int(comm.sum(np.array([st["tasks_stolen"]]))[0])

@@ -45,7 +45,7 @@ def test_fe_membrane_energy_and_strain_reach_the_diagnostics(strain_model):
     assert kinetic == 0 and grav == 0
     assert elastic == pytest.approx(area * E * e * e / 2, rel=1e-10)
     # the step's strain is the principal stretch - 1 whatever the model's measure
-    assert sim._max_strain() == pytest.approx(lam - 1, rel=1e-10)
+    assert sim.comm.max(np.array([sim.max_strain()]))[0] == pytest.approx(lam - 1, rel=1e-10)
     sim.destroy()
 
 
@@ -92,9 +92,9 @@ def test_energy_guard_stops_a_passive_energy_gain_and_names_it():
 
 def test_energy_guard_with_adaptive_steps_keeps_the_bound():
     sim = make_sim(_overstretching_scene(adaptive=True, max_halvings=8))
-    e_ref, scale = sim.energy_guard.reference
+    e_ref, scale = sim.state.energy_reference
     diags = _run(sim, 10)
-    assert abs(sim.time - 1.0) < 1e-12
+    assert abs(sim.state.t - 1.0) < 1e-12
     assert diags[-1]["rejected_steps"] > 0
     assert min(d["step_size"] for d in diags) < 0.1
     # every committed state, halved or not, is inside the guard's bound
@@ -104,13 +104,15 @@ def test_energy_guard_with_adaptive_steps_keeps_the_bound():
 
 def test_guard_waits_for_moving_colliders():
     guard = EnergyGuard(0.1, drive_end=0.5, gravity_scale=1.0)
-    assert not guard.wants_reference(0.0) and not guard.active
-    assert guard.check(0.0, 0.0, 1e6) is None          # work done by a moving body
-    assert guard.wants_reference(0.5)
-    guard.set_reference(kinetic=2.0, gravitational=-1.0, elastic=0.5)   # S = 3.5
-    assert guard.active and guard.check(2.0, -1.0, 0.5 + 0.34) is None
-    assert "0.103 S above" in guard.check(2.0, -1.0, 0.5 + 0.36)
-    assert EnergyGuard(None, 0.0, 1.0).wants_reference(0.0) is False   # off
+    assert not guard.wants_reference(0.0, None)
+    assert guard.check(None, 0.0, 0.0, 1e6) is None    # work done by a moving body
+    assert guard.wants_reference(0.5, None)
+    reference = guard.reference(kinetic=2.0, gravitational=-1.0, elastic=0.5)   # S = 3.5
+    assert reference == (1.5, 3.5)
+    assert not guard.wants_reference(0.6, reference)   # taken once
+    assert guard.check(reference, 2.0, -1.0, 0.5 + 0.34) is None
+    assert "0.103 S above" in guard.check(reference, 2.0, -1.0, 0.5 + 0.36)
+    assert EnergyGuard(None, 0.0, 1.0).wants_reference(0.0, None) is False   # off
 
 
 def test_drive_end_is_the_last_collider_keyframe():
@@ -119,10 +121,10 @@ def test_drive_end_is_the_last_collider_keyframe():
                          "motion": {"times": [0.0, 0.3], "translations": [[0, 0, 0], [0, 0, 0.2]]}},
                         {"shape": "plane", "normal": [0, 0, 1], "offset": 0.0}]
     sim = make_sim(raw)
-    assert sim.collisions.drive_end == pytest.approx(0.3)
-    assert sim.energy_guard.reference is None            # not passive before 0.3 s
+    assert sim.contact.drive_end == pytest.approx(0.3)
+    assert sim.state.energy_reference is None            # not passive before 0.3 s
     _run(sim, 16)                                          # to 0.32 s
-    assert sim.energy_guard.reference is not None
+    assert sim.state.energy_reference is not None
     sim.destroy()
 
 

@@ -1,4 +1,4 @@
-"""Uniaxial tensile test of the continuum membrane (seed 000 §3.5-3.6, Eq. 22).
+"""Uniaxial tensile test of the continuum membrane (EG07 tutorial, Part 1 §3.5-3.6, Eq. 22).
 
 A 0.2 m x 0.05 m strip (alternating 21 x 7 grid) is stretched by a uniform
 engineering strain; its ends are held only along the load axis (sliding pins,
@@ -46,7 +46,7 @@ def strip_reaction(eps, weft, E_weft=100.0, E_warp=50.0, nu_weft=0.3, **material
     for _ in range(5):
         sim.step()
     n = sim.n_owned
-    f = sim.forces(sim.x, np.zeros_like(sim.v), want_jac=False)[:n]
+    f = sim.ctx.forces(sim.state.x, np.zeros_like(sim.state.v), want_jac=False)[:n]
     right = np.isclose(model.rest_positions[sim.layout.owned_input, 0], L / 2)
     reaction = MPI.COMM_WORLD.allreduce(-float(f[right, 0].sum()), op=MPI.SUM)
     sim.destroy()

@@ -1,9 +1,12 @@
 """Collision handling.
 
-BVH kernels (``bvh``, ``traverse``, ``proximity``, ``ccd``, ``tritri``):
+Kernels (``bvh``, ``traverse``, ``proximity``, ``ccd``, ``tritri``,
+``impulses``, ``response``, ``friction``, ``imagespace``, ``mesh_query``):
 AABB hierarchies, stack-based traversal, vertex-face / edge-edge proximity,
-continuous collision detection and triangle-triangle intersection.  Pure
-array code (numpy + numba): no MPI, no PETSc, no configuration; the
-distributed driver (replicated global BVH, task stacks exchanged between
-ranks, seed 000 Part 1 §5.8) is built on top of them.
+continuous collision detection, triangle-triangle intersection, contact and
+friction responses.  Pure array code (numpy + numba): no MPI, no PETSc, no
+configuration.  ``colliders`` holds body geometry and motion; ``contact``
+is the one module that decides how a step treats contact, on top of the
+kernels and of the distributed detector (``parallel/collide.py``: replicated
+global BVH, task stacks exchanged between ranks, EG07 tutorial Part 1 §5.8).
 """

@@ -1,6 +1,6 @@
 """Axis-aligned bounding-box hierarchies over mesh primitives.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §2.3: collision detection between
+EG07 tutorial, Part 1 §2.3: collision detection between
 deformable meshes is accelerated with a bounding volume hierarchy built
 top-down once and then updated; AABBs and k-DOPs are the usual bounding
 volumes for cloth.
@@ -8,7 +8,7 @@ volumes for cloth.
 Why AABBs
 ---------
 The hierarchy is *refit* at the start of every collision phase (the tree
-topology stays fixed, seed 000 Part 1 §5.8.2: "the structure of this
+topology stays fixed, EG07 tutorial, Part 1 §5.8.2: "the structure of this
 hierarchy is kept constant throughout the simulation"), so the two hot
 operations are the bottom-up refit and the box-box overlap test.  For an
 AABB both are 3 min/max pairs and 3 interval tests.  An 18-DOP encloses
@@ -70,9 +70,6 @@ class BVH:
     @property
     def n_prims(self) -> int:
         return int(self.plo.shape[0])
-
-    def is_leaf(self):
-        return self.left < 0
 
     def root_box(self):
         """(lo, hi) of the root; an empty box (+inf, -inf) for an empty tree."""
@@ -258,19 +255,10 @@ def refit(bvh: BVH, prims, x, x_end=None, pad: float = 0.0) -> BVH:
     return bvh
 
 
-def refit_boxes(bvh: BVH, plo, phi) -> BVH:
-    """Refit from given primitive boxes (e.g. the root boxes of sub-trees)."""
-    bvh.plo[...] = plo
-    bvh.phi[...] = phi
-    _refit_nodes(bvh.left, bvh.right, bvh.first, bvh.count, bvh.order,
-                 bvh.plo, bvh.phi, bvh.lo, bvh.hi)
-    return bvh
-
-
 def combine_roots(lo, hi) -> BVH:
     """Top-level tree over the root boxes ``lo, hi (r, 3)`` of r sub-trees.
 
-    Seed 000 Part 1 §5.8.2: each rank builds the BVH of its own sub-mesh,
+    EG07 tutorial, Part 1 §5.8.2: each rank builds the BVH of its own sub-mesh,
     the root boxes are all-gathered and combined into a global hierarchy
     that every rank replicates.  Leaves hold exactly one sub-tree id
     (leaf_size 1) so ``graft`` can splice the sub-trees in.  Empty sub-trees

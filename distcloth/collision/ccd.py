@@ -1,9 +1,9 @@
 """Continuous collision detection for linear trajectories x0 -> x1.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §2.3: "continuous collision
+EG07 tutorial, Part 1 §2.3: "continuous collision
 detection based on BVHs can be used, in which the exact contact points
-between two successive time steps are detected [BFA02]".  Following Provot
-(1997) and Bridson, Fedkiw and Anderson (2002, §4), vertices move linearly
+between two successive time steps are detected" (citing Bridson et al. 2002).
+Following Provot 1997 and Bridson et al. 2002 (§4), vertices move linearly
 over the step, and a vertex-face or edge-edge pair can only meet when its
 four points are coplanar:
 

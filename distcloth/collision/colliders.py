@@ -7,16 +7,16 @@ reference point (the body origin).  Signed distances are negative inside,
 normals are the outward unit normals of the closest surface point.  Arrays in,
 arrays out; no MPI.
 
-The cloth–body contact models that use this geometry are seed 002 §4–5
-(image-space maps of depth, normal and *velocity* of the body, so the body's
-surface velocity enters the response, Eq. 15) and the BVH proximity of seed
-000 Part 1 §2.3 (Bridson-style stopping impulses with friction [BFA02]);
-both need the collider's surface velocity, which is why every collider
-here answers "where is the surface and how fast is it moving" at any t.
+The cloth–body contact models that use this geometry (collision/contact.py)
+are the image-space maps of Vassilev et al. 2001 §4–5 (depth, normal and
+*velocity* of the body, so the body's surface velocity enters the response,
+Eq. 15) and BVH proximity with Bridson-style contact and friction (EG07
+tutorial, Part 1 §2.3; Bridson et al. 2002); both need the collider's
+surface velocity, which is why every collider here answers "where is the
+surface and how fast is it moving" at any t.
 
-``friction`` on a collider is the Coulomb coefficient μ ≥ 0 used by a
-Bridson-style response (seed 000 Part 1 §2.3, [BFA02]); ``thickness`` is the
-contact offset in metres: a point is in contact when phi < thickness.
+``friction`` on a collider is the Coulomb coefficient μ ≥ 0; ``thickness`` is
+the contact offset in metres: a point is in contact when phi < thickness.
 """
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """The collision geometry every rank replicates: one vertex index space for
 the cloth and the kinematic triangle meshes of the colliders.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §5.8.2: "each processor builds the
-BVH of its own sub-mesh"; the sub-trees are combined into a global hierarchy
+EG07 tutorial, Part 1 §5.8.2: each processor builds a BVH over its own
+sub-mesh; the sub-trees are combined into a global hierarchy
 replicated on every rank, and the tests between (sub-)hierarchies are the
 top-level tasks.  Here the *objects* of that hierarchy are
 
@@ -43,7 +43,7 @@ class CollisionGeometry:
         cloth_tri = np.asarray(cloth_tri, dtype=np.int64).reshape(-1, 3)
         self.n_cloth = int(n_cloth)
         self.n_ranks = int(n_ranks)
-        tris, offs, owners = [cloth_tri], [self.n_cloth], []
+        tris, offs = [cloth_tri], [self.n_cloth]
         self.object_tris = [np.flatnonzero(np.asarray(tri_owner) == r) for r in range(n_ranks)]
         start = cloth_tri.shape[0]
         for nv, tri in colliders:

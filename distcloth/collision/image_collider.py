@@ -1,4 +1,4 @@
-"""Image-space body collider (seed 002 §4): the depth, normal and velocity
+"""Image-space body collider (Vassilev et al. 2001 §4): the depth, normal and velocity
 maps of :mod:`.imagespace` behind the ``query(points, t)`` interface of
 :class:`.colliders.AnalyticCollider` and :class:`.mesh_query.MeshProximity`.
 
@@ -10,13 +10,13 @@ pixel) onto its bounding box at t in the two image axes (u, v) =
 deforming one is re-rendered when t changes (the maps of the last t are
 kept).  Pick the axis so that every line along it crosses the body in one
 interval (only the outermost front and back layers are stored): for the
-shipped torso (z up) that is its front/back axis y (axis=1) or x, as in the
-seed, not z (a vertical line crosses hips and shoulders separately).
+shipped torso (z up) that is its front/back axis y (axis=1) or x, as in
+Vassilev et al. 2001, not z (a vertical line crosses hips and shoulders separately).
 
 Signed distance.  At the point's pixel (nearest pixel centre, Eq. 11) with
 front depth F and back depth B, the signed *axial* gap is
 s = max(w - F, B - w): > 0 above the front or below the back, < 0 between
-them (the seed's inside test, Eq. 12), and the nearer layer (front if
+them (Vassilev et al. 2001's inside test, Eq. 12), and the nearer layer (front if
 w >= (F + B)/2) gives the surface sample c = (pixel centre, F or B), its
 interpolated outward normal n and velocity.  s is a distance along the axis,
 not to the surface; the returned estimate is the distance to the tangent
@@ -31,7 +31,7 @@ It is exact for a locally planar surface (y - phi n, c and the surface
 between them on one plane, and n that plane's normal: flat shading, or a
 region where the vertex normals agree), whatever the slope and wherever the
 point sits in its pixel.  ``subpixel=False`` drops the delta term
-(phi = s |n . a|, its sign exactly the seed's test; error up to
+(phi = s |n . a|, its sign exactly Vassilev et al.'s test; error up to
 |delta| |n_t| <= half the pixel diagonal on a plane).  On a curved surface of
 curvature kappa the tangent plane departs from the surface by about
 kappa L^2 / 2 over the distance L between c and the true closest point;
@@ -54,20 +54,20 @@ from __future__ import annotations
 import numpy as np
 
 from .colliders import MeshCollider
-from .imagespace import ImageMaps, pixel_index, render_maps, velocity_response, xy_error_bound
+from .imagespace import ImageMaps, pixel_index, render_maps, xy_error_bound
 
 __all__ = ["ImageSpaceCollider"]
 
 
 class ImageSpaceCollider:
-    """Seed 002 §4 image-space collision against a :class:`MeshCollider`.
+    """Vassilev et al. 2001 §4 image-space collision against a :class:`MeshCollider`.
 
     ``resolution``: map size (nu, nv) in pixels (an int for square maps); a
     setting, changing it drops the cached maps.  ``axis``: projection axis
     (0, 1, 2).  ``margin`` (m): padding of the body's bounding box in the two
     image axes.  ``subpixel``: add the sub-pixel lateral term to phi (see the
     module docstring).  ``smooth_normals``: Gouraud-interpolated vertex
-    normals as in the seed (§4.2), else flat face normals.
+    normals as in Vassilev et al. 2001 (§4.2), else flat face normals.
     ``friction``/``thickness`` are the collider's (Coulomb μ and contact
     offset: contact when phi < thickness).  ``n_renders`` counts renderings.
     """
@@ -130,7 +130,7 @@ class ImageSpaceCollider:
 
     @property
     def error_bound(self) -> np.ndarray:
-        """Seed 002 Eq. 14 x–y error (Δu, Δv) = extent / pixels of the current
+        """Vassilev et al. 2001 Eq. 14 x–y error (Δu, Δv) = extent / pixels of the current
         maps (those of the last queried t; of the first frame if none yet)."""
         maps = self._maps if self._maps is not None else self.maps(self._t0)
         return xy_error_bound(maps.bounds, maps.resolution)
@@ -179,11 +179,3 @@ class ImageSpaceCollider:
         phi, normal, _ = self.query(points, t, max_distance)
         return phi, normal
 
-    @staticmethod
-    def response(v_cloth, normal, v_body, friction, reflection) -> np.ndarray:
-        """Seed 002 Eq. 15, v_res = C_fric v_t − C_refl v_n + v_object
-        (:func:`.imagespace.velocity_response`) with the normal and body
-        velocity returned by :meth:`query`.  ``friction`` is C_fric, the
-        *kept* fraction of tangential relative velocity (1 frictionless, 0
-        stick), not the collider's Coulomb μ."""
-        return velocity_response(v_cloth, normal, v_body, friction, reflection)

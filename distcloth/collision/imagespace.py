@@ -1,6 +1,6 @@
-"""Image-space cloth–body collision (seed 002 §4–5), rasterised in software.
+"""Image-space cloth–body collision (Vassilev et al. 2001 §4–5), rasterised in software.
 
-Seed 002 §4 renders the body twice with orthographic cameras, from the front
+Vassilev et al. 2001 §4 renders the body twice with orthographic cameras, from the front
 and from the back of its bounding box, and reads back the z-buffer (depth
 map), the Gouraud-interpolated vertex normals (normal map, §4.2) and the
 Gouraud-interpolated vertex velocities (velocity map, §4.3).  A cloth point
@@ -17,7 +17,7 @@ pixel (what a viewer at +∞ on the axis sees), the BACK map the smallest.
 Pixel (i, j) covers [u0 + i du, u0 + (i+1) du) × [v0 + j dv, v0 + (j+1) dv);
 the body is sampled at pixel centres.  Only the outermost front and back
 layers are stored: a body part hidden behind another along the axis (an arm
-in front of the torso) is not represented, as in the seed.
+in front of the torso) is not represented, as in the paper.
 """
 from __future__ import annotations
 
@@ -30,14 +30,13 @@ from numba import njit
 
 __all__ = [
     "ImageMaps", "MapContact", "render_maps", "lookup", "pixel_index", "xy_error_bound",
-    "resolution_for_error", "velocity_response", "reaction_force",
-    "coulomb_velocity_response", "vertex_normals",
+    "resolution_for_error", "velocity_response", "vertex_normals",
 ]
 
 
 @dataclass(frozen=True)
 class ImageMaps:
-    """Front and back depth / normal / velocity maps of one view (seed 002 §4.1–4.3).
+    """Front and back depth / normal / velocity maps of one view (Vassilev et al. 2001 §4.1–4.3).
 
     Arrays are indexed [i, j] by pixel (u index, v index).  Uncovered pixels:
     front_depth = -inf, back_depth = +inf, normals and velocities zero."""
@@ -100,15 +99,15 @@ def _bounds_resolution(bounds, resolution) -> tuple[np.ndarray, tuple[int, int]]
 # ---------------------------------------------------------------- error bound (§4.5)
 
 def xy_error_bound(bounds, resolution) -> np.ndarray:
-    """Seed 002 §4.5 Eq. 14: "Δx = Δy = bboxheight / mapsize ≈ (160 to 180) /
+    """Vassilev et al. 2001 §4.5 Eq. 14: "Δx = Δy = bboxheight / mapsize ≈ (160 to 180) /
     mapsize cm" — the x–y discretisation error of the maps is the pixel pitch,
-    the extent of the map divided by its number of pixels (the seed's map is
+    the extent of the map divided by its number of pixels (the paper's map is
     square and spans the body's height).  Returned per image axis:
     (Δu, Δv) = (extent_u / nu, extent_v / nv).
 
     With the nearest-pixel lookup used here a query point is compared with
     the body sampled at most (Δu/2, Δv/2) away laterally, so the pitch is a
-    conservative bound (the seed quotes the pitch itself).  The depth error of
+    conservative bound (the paper quotes the pitch itself).  The depth error of
     Eq. 13 is float64 round-off here."""
     b, (nu, nv) = _bounds_resolution(bounds, resolution)
     return (b[:, 1] - b[:, 0]) / np.array([nu, nv], dtype=np.float64)
@@ -116,7 +115,7 @@ def xy_error_bound(bounds, resolution) -> np.ndarray:
 
 def resolution_for_error(bounds, max_error: float) -> tuple[int, int]:
     """Smallest map size (nu, nv) whose Eq. 14 error (pixel pitch) is at most
-    ``max_error`` on both axes: mapsize = ceil(extent / Δ).  The seed's
+    ``max_error`` on both axes: mapsize = ceil(extent / Δ).  The paper's
     example: Δ = 0.5 cm over a 160–180 cm body gives 320–360 pixels."""
     if not max_error > 0:
         raise ValueError("max_error must be positive")
@@ -216,12 +215,12 @@ def _rasterise(u, v, w, tri, attr_n, attr_v, smooth, face_n, u0, v0, du, dv,
 def render_maps(vertices, triangles, velocities, bounds, resolution, axis: int = 2,
                 smooth_normals: bool = True) -> ImageMaps:
     """Front and back depth, normal and velocity maps of a triangle mesh
-    (seed 002 §4.1–4.3) by orthographic projection along ``axis`` onto the
+    (Vassilev et al. 2001 §4.1–4.3) by orthographic projection along ``axis`` onto the
     (u, v) rectangle ``bounds`` = ((u_min, u_max), (v_min, v_max)) with
     ``resolution`` = (nu, nv) pixels.  ``velocities``: per-vertex body
     velocities (n, 3) or None (zero).  Normals are outward for a consistently
     outward-oriented mesh; ``smooth_normals`` interpolates area-weighted
-    vertex normals as the seed's Gouraud shading does, otherwise face normals."""
+    vertex normals as the paper's Gouraud shading does, otherwise face normals."""
     a_u, a_v = _plane_axes(axis)
     b, (nu, nv) = _bounds_resolution(bounds, resolution)
     x = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
@@ -263,7 +262,7 @@ def pixel_index(maps: ImageMaps, points) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 def lookup(maps: ImageMaps, points, thickness: float = 0.0) -> MapContact:
-    """Collision test of seed 002 §4.4 for many points.
+    """Collision test of Vassilev et al. 2001 §4.4 for many points.
 
     A point is inside when back − thickness < w < front + thickness at its
     pixel (Eq. 12 tests front and back separately, picking the map by the
@@ -297,7 +296,7 @@ def _split(vectors, normal) -> tuple[np.ndarray, np.ndarray]:
 
 
 def velocity_response(v_cloth, normal, v_body, friction, reflection) -> np.ndarray:
-    """Seed 002 §5 Eq. 15, for colliding points (vectorised; coefficients
+    """Vassilev et al. 2001 §5 Eq. 15, for colliding points (vectorised; coefficients
     scalars or per point):
 
         v_rel = v − v_object,   v_rel = v_n + v_t (normal, tangential parts)
@@ -306,7 +305,7 @@ def velocity_response(v_cloth, normal, v_body, friction, reflection) -> np.ndarr
     ``friction`` is C_fric and ``reflection`` C_refl.  Note C_fric multiplies
     the kept tangential velocity: C_fric = 1 is frictionless sliding, 0 makes
     the point stick to the body; C_refl = 0 leaves zero relative normal
-    velocity, 1 is an elastic bounce.  As in the seed the rule is applied to
+    velocity, 1 is an elastic bounce.  As in the paper the rule is applied to
     every colliding point; with C_refl > 0 the caller should apply it only to
     approaching points (v_rel · n < 0), otherwise a separating point is sent
     back into the body."""
@@ -323,48 +322,3 @@ def velocity_response(v_cloth, normal, v_body, friction, reflection) -> np.ndarr
     return c_fric * v_t - c_refl * v_n + vo
 
 
-def reaction_force(force, normal, friction) -> np.ndarray:
-    """Seed 002 §5 Eq. 16: the force f_p on a colliding cloth vertex is split
-    into its normal part f_n and tangential part f_t, and the body reacts with
-
-        f_reaction = −C_fric f_t − f_n                              (16)
-
-    (the first term "is due to the friction").  Here C_fric removes that
-    fraction of the tangential force (1: full stick), the opposite reading to
-    Eq. 15 where C_fric keeps that fraction of tangential velocity; the seed
-    uses one symbol for both, callers may pass different values.  As in the
-    seed the whole normal part is cancelled, whichever way it points; a caller
-    wanting only compressive contact applies it where f · n < 0."""
-    f = np.asarray(force, dtype=np.float64)
-    n = np.asarray(normal, dtype=np.float64)
-    c_fric = np.asarray(friction, dtype=np.float64)
-    if c_fric.ndim:
-        c_fric = c_fric[..., None]
-    f_n, f_t = _split(f, n)
-    return -c_fric * f_t - f_n
-
-
-def coulomb_velocity_response(v_cloth, normal, v_body, mu, reflection=0.0) -> np.ndarray:
-    """Alternative to Eq. 15 with a Coulomb friction coefficient μ: the
-    Bridson-style response cited by seed 000 Part 1 §2.3 ([BFA02]; the
-    formula is from Bridson, Fedkiw, Anderson 2002 §7.2, not in the seed).
-    For approaching points (v_rel · n < 0) the relative normal velocity
-    becomes −C_refl v_n, a change Δv_n = (1 + C_refl)|v_n|, and the tangential
-    velocity is reduced by at most μ Δv_n:  v_t ← max(0, 1 − μ Δv_n/|v_t|) v_t.
-    Separating points keep their velocity."""
-    v = np.asarray(v_cloth, dtype=np.float64)
-    vo = np.asarray(v_body, dtype=np.float64)
-    n = np.asarray(normal, dtype=np.float64)
-    mu = np.asarray(mu, dtype=np.float64)
-    refl = np.asarray(reflection, dtype=np.float64)
-    rel = v - vo
-    vn_scalar = np.sum(rel * n, axis=-1)
-    approaching = vn_scalar < 0
-    v_n, v_t = _split(rel, n)
-    dvn = (1.0 + refl) * np.maximum(-vn_scalar, 0.0)
-    vt_len = np.linalg.norm(v_t, axis=-1)
-    scale = np.maximum(0.0, 1.0 - mu * dvn / np.where(vt_len > 0, vt_len, 1.0))
-    if np.ndim(refl):
-        refl = refl[..., None]
-    new_rel = scale[..., None] * v_t - refl * v_n
-    return np.where(approaching[..., None], new_rel + vo, v)

@@ -1,12 +1,12 @@
 """Bridson-style collision response on arrays: self-collision and kinematic colliders.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §2.3: the response of Bridson,
-Fedkiw and Anderson [BFA02] applies "a stopping impulse to approaching
+EG07 tutorial, Part 1 §2.3: the response of Bridson, Fedkiw and Anderson
+(Bridson et al. 2002) applies "a stopping impulse to approaching
 triangles (i.e. adjusts their nodal velocities) whenever their distance
 falls below a certain threshold", CCD catches the fast ones, and a fail-safe
 is needed because "even with such robust approaches there can be situations
 in which intersections cannot be prevented".  This module is that pipeline
-(BFA02 §3 overview): proximity repulsion at x0 (§7.2, friction §7.3), CCD
+(Bridson et al. 2002 §3 overview): proximity repulsion at x0 (§7.2, friction §7.3), CCD
 impulse iterations (§6 detection, §7.1 impulses), rigid impact zones
 (§7.4, after Provot 1997).  Pure arrays, no MPI.
 
@@ -27,7 +27,7 @@ vertex-face (v; f0 f1 f2): c = (1, -w0, -w1, -w2), n face -> vertex;
 edge-edge (a0 a1; b0 b1):  c = (-(1-s), -s, 1-t, t), n edge a -> edge b
 (the conventions of proximity.py and ccd.py).  The relative normal velocity
 is vn = n . sum_j c_j u_j.  An impulse P changes u_j by c_j inv_m_j P, hence
-the relative velocity by S P with S = sum_j c_j^2 inv_m_j: the BFA02 §7.1
+the relative velocity by S P with S = sum_j c_j^2 inv_m_j: the Bridson et al. 2002 §7.1
 "I / (1 + sum w^2)" distribution written with inverse masses (kinematic
 vertices simply drop out of S).  Since sum_j c_j = 0, every pair impulse
 conserves linear momentum when all its vertices are free.
@@ -48,10 +48,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .bvh import build_bvh
 from .ccd import edge_edge_ccd, vertex_face_ccd
+from .friction import coulomb_fraction
 from .proximity import edge_edge_contacts, vertex_face_contacts
-from .traverse import cross_pairs, self_pairs, unique_rows
+from .traverse import unique_rows
 
 _S_MIN = 1e-12        # S <= this * max inv_mass of the pair: contact point ~kinematic, left to zones
 _PINV_RCOND = 1e-12   # relative cut-off for singular zone inertias / affine fits
@@ -59,28 +59,10 @@ _PINV_RCOND = 1e-12   # relative cut-off for singular zone inertias / affine fit
 
 # ------------------------------------------------------------------ candidates
 
-def serial_candidates(tri, edges, thickness: float, leaf_size: int = 4):
-    """Candidate finder ``f(x0, x1) -> (vf (k, 2) [vertex, face], ee (l, 2)
-    [ea < eb])`` from the serial BVH code: swept boxes of x0 -> x1, each
-    padded by ``thickness`` (so every pair that comes within 2 thickness
-    is listed).  The distributed simulator passes its own finder."""
-    tri = np.ascontiguousarray(tri, dtype=np.int64).reshape(-1, 3)
-    edges = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
-    pad = float(thickness)
-
-    def find(x0, x1):
-        pts = np.arange(np.asarray(x0).shape[0], dtype=np.int64)[:, None]
-        vb = build_bvh(pts, x0, x1, pad, leaf_size)
-        fb = build_bvh(tri, x0, x1, pad, leaf_size)
-        eb = build_bvh(edges, x0, x1, pad, leaf_size)
-        return cross_pairs(vb, fb), self_pairs(eb)
-    return find
-
-
 def clean_pairs(vf, ee, tri, edges, inv_mass):
     """Canonical candidate rows: vf sorted unique, ee as (ea < eb) sorted
     unique; rows whose primitives share a vertex or whose vertices are all
-    kinematic are dropped (BFA02: adjacent primitives touch by construction;
+    kinematic are dropped (Bridson et al. 2002: adjacent primitives touch by construction;
     collider-collider pairs need no response)."""
     vf = unique_rows(np.asarray(vf, dtype=np.int64).reshape(-1, 2))
     ee = unique_rows(np.sort(np.asarray(ee, dtype=np.int64).reshape(-1, 2), axis=1))
@@ -121,7 +103,7 @@ def _cat(*parts):
 @njit(cache=True)
 def _jacobi_pass(u, inv_mass, ids, coef, normal, target, mu, du):
     """One Jacobi pass: pair p wants vn >= target[p]; its impulse is
-    P = (dvn n - min(mu dvn, |vt|) vt/|vt|) / S (BFA02 §7.1 distribution,
+    P = (dvn n - min(mu dvn, |vt|) vt/|vt|) / S (Bridson et al. 2002 §7.1 distribution,
     §7.3 Coulomb friction on the relative tangential velocity vt), scaled by
     1/max active count over its free vertices, accumulated into du in pair
     order.  Returns the number of active pairs."""
@@ -147,7 +129,7 @@ def _jacobi_pass(u, inv_mass, ids, coef, normal, target, mu, du):
             continue
         t0 = vr0 - vn * n0; t1 = vr1 - vn * n1; t2 = vr2 - vn * n2
         vt = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-        f = min(mu * dvn, vt) / vt if vt > 0.0 else 0.0
+        f = coulomb_fraction(vt, mu * dvn)
         P[p, 0] = (dvn * n0 - f * t0) / S
         P[p, 1] = (dvn * n1 - f * t1) / S
         P[p, 2] = (dvn * n2 - f * t2) / S
@@ -195,7 +177,7 @@ def _prep(x0, u, inv_mass, tri, edges):
 # ------------------------------------------------------------------ 1. proximity repulsion
 
 def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, iterations=4):
-    """Proximity response at x0 (BFA02 §7.2, friction §7.3) for the contacts
+    """Proximity response at x0 (Bridson et al. 2002 §7.2, friction §7.3) for the contacts
     ``vf`` / ``ee`` (proximity.py NamedTuples, distance < thickness).
 
     Each pair gets the normal velocity change dvn = max(0, (thickness - d)/h - vn):
@@ -219,7 +201,7 @@ def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, i
 # ------------------------------------------------------------------ 2. CCD impulses
 
 def collisions(x0, x1, tri, edges, vf_pairs, ee_pairs, eta, with_rows=False):
-    """CCD hits (BFA02 §6, ccd.py) of clean candidate rows over x0 -> x1:
+    """CCD hits (Bridson et al. 2002 §6, ccd.py) of clean candidate rows over x0 -> x1:
     stencils (ids (k, 4), coef (k, 4), normal (k, 3)) of the hitting pairs,
     vertex-face hits first, each block in candidate (canonical) order;
     ``with_rows``: also the indices of the hitting vf and ee rows."""
@@ -235,7 +217,7 @@ def collisions(x0, x1, tri, edges, vf_pairs, ee_pairs, eta, with_rows=False):
 def ccd_impulses(x0, u, h, inv_mass, tri, edges, vf_pairs, ee_pairs, thickness,
                  eta=None, margin=0.01, sweeps=8, hits=collisions):
     """One detection pass over the CCD hits of the candidates on
-    x0 -> x0 + h u, answered with inelastic impulses (BFA02 §7.1).  For a hit with normal n and
+    x0 -> x0 + h u, answered with inelastic impulses (Bridson et al. 2002 §7.1).  For a hit with normal n and
     start gap g0 = n . sum c_j x0_j the relative normal velocity is raised to
 
         vn >= (min(max(g0, 0), thickness) - g0 + margin * thickness) / h,
@@ -307,7 +289,7 @@ def rigidify(x0, u, inv_mass, idx, z):
     """Zone velocities for the zone vertices ``idx`` with zone labels ``z``
     (0..nz-1).  Returns u with those rows replaced (kinematic rows kept).
 
-    Free zone (BFA02 §7.4, Provot 1997): u = v + w x (x0 - c), with c, v the
+    Free zone (Bridson et al. 2002 §7.4, Provot 1997): u = v + w x (x0 - c), with c, v the
     centre of mass and its velocity and w = I^+ L, so linear and angular
     momentum are conserved exactly (to rounding).  This is the linearised
     rigid motion: x0 -> x0 + t h u is an affine map I + t h [w]x whose
@@ -359,7 +341,7 @@ def rigidify(x0, u, inv_mass, idx, z):
 
 def impact_zones(x0, u, h, inv_mass, tri, edges, thickness, candidates, max_iterations=100,
                  eta=None, parent=None, hits=collisions):
-    """Fail-safe (BFA02 §7.4): detect CCD hits on x0 -> x0 + h u, merge the
+    """Fail-safe (Bridson et al. 2002 §7.4): detect CCD hits on x0 -> x0 + h u, merge the
     vertices of every hitting pair into zones (union-find, merging with the
     zones of earlier iterations, or of ``parent`` if given), give every zone
     its rigid velocity (``rigidify``), repeat until no hit remains or
@@ -424,7 +406,7 @@ class ReusedCandidates:
     within s |x1' - x1| <= slack of the old one, so every pair whose swept
     boxes (grown by the pad) overlap on the new paths is among the pairs
     found with the pad + slack on the old ones; the narrow phase is exact,
-    so the extra pairs change nothing.  On a pile-up (seed 000 Fig. 19) the
+    so the extra pairs change nothing.  On a pile-up (EG07 tutorial, Part 1 Fig. 19) the
     CCD and impact-zone passes move few vertices by little, and a whole
     traversal per pass was 39 traversals per step.  The decision uses the
     replicated arrays only, so every rank makes it alike (the detection is
@@ -453,7 +435,7 @@ class ReusedCandidates:
 def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
             max_ccd_iterations=10, max_zone_iterations=100, repulsion_iterations=4,
             sweeps=8, eta=None, margin=0.01, hits=collisions):
-    """The BFA02 §3 pipeline on the average velocity u of a step:
+    """The Bridson et al. 2002 §3 pipeline on the average velocity u of a step:
 
     1. proximity at x0 (pairs closer than ``thickness``) -> ``repulsion``;
     2. up to ``max_ccd_iterations`` passes of ``ccd_impulses`` (new candidates

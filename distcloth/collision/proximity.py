@@ -1,7 +1,7 @@
 """Proximity queries on candidate pairs: vertex-face and edge-edge.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §2.3: the response of Bridson et
-al. [BFA02] acts on vertex-triangle and edge-edge pairs "whenever their
+EG07 tutorial, Part 1 §2.3: the response of Bridson et
+al. 2002 acts on vertex-triangle and edge-edge pairs "whenever their
 distance falls below a certain threshold" (the cloth thickness); these
 kernels find those pairs among the BVH candidates and return what the
 response needs: the ids, the barycentric weights of the closest points, the

@@ -1,9 +1,7 @@
-"""Cloth–body contact response against analytic colliders: pure array kernels.
+"""Cloth-body contact kernels: arrays in, arrays out (no MPI, no PETSc).
 
-No MPI, no PETSc: the simulation (``distcloth/simulation.py``, stages
-``collision:bodies`` and ``collision:response``) queries the colliders
-(:mod:`distcloth.collision.colliders`) and hands their phi / normal /
-velocity arrays to these functions.  Why each choice:
+The contact module (``collision/contact.py``) queries the colliders and hands
+their phi / normal / velocity arrays to these functions.  Why each choice:
 
 **Contact zone.**  A vertex touches collider c when its *predicted* distance
 ``phi + h (v - v_b).n`` is below ``d + margin`` with ``d`` = cloth thickness +
@@ -29,21 +27,17 @@ stays pinned).  A contact whose normal impulse was adhesive (negative) in
 the previous step is released for one step, as Baraff and Witkin do,
 unless it is penetrating.
 
-**Coulomb friction after the solve (Bridson, Fedkiw and Anderson 2002;
-seed 000 Part 1 §2.3).**  The normal velocity change the contact produced is
-estimated as ``dv_n = (v_new - v_free).n`` with ``v_free = v + h f/m`` and f
-the forces at the start of the step (the first force evaluation of the
-integrator).  The tangential velocity relative to the body is then reduced
-by ``mu dv_n`` and clamped at zero, so ``|v_t| <= mu dv_n`` is static
-friction.  On an inclined plane this gives exactly
+**Coulomb friction after the solve (Bridson et al. 2002 §7.3)**, for the
+explicit schemes (implicit ones take friction into the solve,
+``physics/contact_friction.py``).  The normal velocity change the contact
+produced is estimated as ``dv_n = (v_new - v_free).n`` with
+``v_free = v + h f/m`` and f the forces at the start of the step; the
+tangential velocity relative to the body is then reduced by ``mu dv_n`` and
+clamped at zero (``collision/friction.py``), so ``|v_t| <= mu dv_n`` is
+static friction.  On an inclined plane this gives exactly
 ``a = g (sin t - mu cos t)`` per step.  Positions follow the velocity
-change through the integrator's own dx1/dv1 (h for backward Euler, h/2 for
-implicit midpoint, 2h/3 for BDF2, h beta/gamma for Newmark, h for the
-explicit schemes), so ``x_new = x_old + h v_new`` stays true for backward
-Euler.  Implicit schemes no longer use this clamp: they take friction into
-the solve (distcloth/physics/contact_friction.py), because a vertex held
-back after the solve stretches the cloth its neighbours moved; explicit
-schemes still do.
+change through the integrator's own dx1/dv1 (the step result's
+``position_gain``).
 
 **Position fail-safe.**  After the response, any vertex still at phi < d
 (curvature, a missed contact, a vertex released as adhesive) is moved
@@ -61,6 +55,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .friction import coulomb_fractions
 
 
 @dataclass
@@ -132,9 +128,8 @@ def friction(v_new, vb, normal, mu, dvn) -> np.ndarray:
     vrel = v_new - vb
     vt = vrel - np.einsum("ni,ni->n", vrel, normal)[:, None] * normal
     speed = np.linalg.norm(vt, axis=1)
-    drop = mu * np.maximum(dvn, 0.0)
-    scale = np.where(speed > drop, 1.0 - drop / np.where(speed > 0, speed, 1.0), 0.0)
-    return v_new - (1.0 - scale)[:, None] * vt
+    removed = coulomb_fractions(speed, mu * np.maximum(dvn, 0.0))
+    return v_new - removed[:, None] * vt
 
 
 def project(x, v, phi, normal, vb, d) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

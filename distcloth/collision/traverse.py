@@ -1,6 +1,6 @@
 """BVH-vs-BVH traversal as independent tests on an explicit stack.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §5.8.1: the recursive test of two
+EG07 tutorial, Part 1 §5.8.1: the recursive test of two
 hierarchies is a depth first traversal driven by a stack of pending tests;
 tests can be popped from the top and executed in place, or removed from the
 *bottom* of the stack and handed to another task (they originate closer to
@@ -232,8 +232,8 @@ class TraversalState:
         return ran
 
     def take_bottom(self, k: int) -> np.ndarray:
-        """Remove the k bottom tests (closest to the root, seed 000 Part 1
-        §5.8.2) and return them as an independent task (k, 4)."""
+        """Remove the k bottom tests (closest to the root, EG07 tutorial,
+        Part 1 §5.8.2) and return them as an independent task (k, 4)."""
         self.stack, self.top, rows = take_bottom(self.stack, self.top, k)
         return rows
 

@@ -1,6 +1,6 @@
 """Triangle-triangle intersection: the oracle for "is the cloth tangled".
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §2.3 notes that even robust
+The EG07 tutorial, Part 1 §2.3, notes that even robust
 response cannot always prevent intersections (multi-layer collisions,
 pinching), so a simulation needs a way to *detect* an intersecting state;
 this module counts the intersecting triangle pairs of a mesh.
@@ -327,11 +327,6 @@ def self_intersecting_pairs(x, tri, candidate_pairs=None) -> np.ndarray:
     flags = np.zeros(pairs.shape[0], np.bool_)
     _flag_pairs(x, tri, pairs, flags)
     return pairs[flags]
-
-
-def count_self_intersections(x, tri, candidate_pairs=None) -> int:
-    """Number of intersecting triangle pairs of the mesh (see module docstring)."""
-    return int(self_intersecting_pairs(x, tri, candidate_pairs).shape[0])
 
 
 @njit(cache=True)

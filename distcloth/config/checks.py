@@ -33,7 +33,9 @@ def is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _bounds_text(above: float | None, at_least: float | None, at_most: float | None) -> str:
+def bounds_text(above: float | None = None, at_least: float | None = None,
+                at_most: float | None = None) -> str:
+    """' > 0', ' >= 1 and <= 100' or ''."""
     parts = []
     if above is not None:
         parts.append(f"> {above:g}")
@@ -44,9 +46,25 @@ def _bounds_text(above: float | None, at_least: float | None, at_most: float | N
     return (" " + " and ".join(parts)) if parts else ""
 
 
+def number_text(above: float | None = None, at_least: float | None = None,
+                at_most: float | None = None) -> str:
+    return "a finite number" + bounds_text(above, at_least, at_most)
+
+
+def integer_text(at_least: int | None = None, at_most: int | None = None) -> str:
+    return "an integer" + bounds_text(None, at_least, at_most)
+
+
+def choice_text(choices: Iterable[str]) -> str:
+    return "one of " + " | ".join(choices)
+
+
+BOOL_TEXT = "true or false"
+
+
 def read_float(value: Any, key: str, *, above: float | None = None,
                at_least: float | None = None, at_most: float | None = None) -> float:
-    allowed = "a finite number" + _bounds_text(above, at_least, at_most)
+    allowed = number_text(above, at_least, at_most)
     if isinstance(value, str):
         try:
             number = float(value)      # YAML 1.1 reads '1e-5' as a string: accept it
@@ -70,7 +88,7 @@ def read_float(value: Any, key: str, *, above: float | None = None,
 
 def read_int(value: Any, key: str, *, at_least: int | None = None,
              at_most: int | None = None) -> int:
-    allowed = "an integer" + _bounds_text(None, at_least, at_most)
+    allowed = integer_text(at_least, at_most)
     if not isinstance(value, int) or isinstance(value, bool):
         raise ConfigError(key, value, allowed)
     if (at_least is not None and value < at_least) or (at_most is not None and value > at_most):
@@ -80,7 +98,7 @@ def read_int(value: Any, key: str, *, at_least: int | None = None,
 
 def read_bool(value: Any, key: str) -> bool:
     if not isinstance(value, bool):
-        raise ConfigError(key, value, "true or false")
+        raise ConfigError(key, value, BOOL_TEXT)
     return value
 
 
@@ -93,7 +111,7 @@ def read_str(value: Any, key: str, allowed: str = "a non-empty string") -> str:
 def read_choice(value: Any, key: str, choices: Iterable[str]) -> str:
     choices = tuple(choices)
     if not isinstance(value, str) or value not in choices:
-        raise ConfigError(key, value, "one of " + " | ".join(choices))
+        raise ConfigError(key, value, choice_text(choices))
     return value
 
 
@@ -120,12 +138,6 @@ def read_mapping(value: Any, key: str, allowed_keys: Iterable[str]) -> dict:
         if name not in allowed_keys:
             raise ConfigError(join(key, name), entry, unknown_key_text(name, allowed_keys))
     return value
-
-
-def read_section(value: Any, key: str, allowed_keys: Iterable[str]) -> dict:
-    """Like :func:`read_mapping`, but null is an empty mapping: YAML gives null
-    for a section whose entries are all commented out, meaning "all defaults"."""
-    return {} if value is None else read_mapping(value, key, allowed_keys)
 
 
 def unknown_key_text(name: object, allowed_keys: Iterable[str]) -> str:

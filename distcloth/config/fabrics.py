@@ -1,14 +1,14 @@
 """Named fabrics a scene can start from: ``material: {preset: denim, bending: 2e-4}``.
 
 Every value here is ILLUSTRATIVE: chosen to be of the order of magnitude of
-KES/FAST measurements of such fabrics as discussed in seed 000 Part 2 §1
+KES/FAST measurements of such fabrics as discussed in the EG07 tutorial, Part 2 §1
 (which gives no numeric tables), not taken from a specific table of a
 specific publication.  No value may be given a citation it does not have;
 replace an entry with measured data, and its source, when one is at hand.
 
 Units: density kg/m², moduli times thickness N/m (continuum membrane,
 model: fem), bending stiffness N·m.  nu_warp follows from the symmetry of
-seed 000 Eq. 22 (nu_warp = nu_weft E_warp / E_weft).
+the EG07 tutorial, Part 1 Eq. 22 (nu_warp = nu_weft E_warp / E_weft).
 """
 from __future__ import annotations
 

@@ -1,13 +1,17 @@
-"""Typed scene configuration: frozen dataclasses with defaults, SI units.
+"""Typed scene configuration: frozen dataclasses, SI units, every key described once.
 
-The YAML layout and every allowed value are documented in docs/config.md;
-:mod:`distcloth.config.load` turns YAML (plus ``--set`` overrides) into these
-objects and refuses anything else with a :class:`ConfigError`.
+Each field carries its doc line, unit, default and allowed values
+(describe.py); the loader, the ``--set`` key tree, the resolved YAML and the
+key reference of docs/config.md are generated from these declarations.  Rules
+that tie several keys together live in rules.py.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass
 from typing import Any
+
+from .describe import GIVEN, Only, choice, section, setting
+from .fabrics import FABRICS
 
 EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions", "self_collision")
 COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box", "mesh")
@@ -28,16 +32,30 @@ BENDING_MODELS = ("flexion", "dihedral", "isometric", "dihedral_shell", "isometr
 MAT_TYPES = ("baij", "aij")
 DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
 DRAPE_STOP_ON = ("potential", "kinetic")
+MAX_NEWTON_ITERATIONS = 100
 
-# PETSc options a scene gets unless it says otherwise (seed 000 §5.6: CG with
-# block Jacobi over the ranks, SSOR on each block; BAIJ SOR allows only
-# omega = 1, i.e. symmetric Gauss-Seidel).
+# The prefix of distcloth's PETSc options (-distcloth_ksp_rtol), written once:
+# linalg/petsc.py and the command line take it from here.
+OPTION_PREFIX = "distcloth_"
+
+# PETSc options a scene gets unless it says otherwise (EG07 tutorial, Part 1
+# §5.6: CG with block Jacobi over the ranks, SSOR on each block; BAIJ SOR
+# allows only omega = 1, i.e. symmetric Gauss-Seidel).
 DEFAULT_SOLVER: dict[str, Any] = {
     "ksp_type": "cg",
     "pc_type": "bjacobi",
     "sub_pc_type": "sor",
     "ksp_rtol": 1.0e-5,
 }
+
+# keys that apply only with one value of another key
+FEM_ONLY = Only("model", "fem", "only with model: fem (mass_spring uses stretch, shear and "
+                                "flexion springs)")
+MESH_ONLY = Only("shape", "mesh", "only with shape: mesh")
+IMAGE_ONLY = Only("method", "image", "only with method: image")
+FILE_ONLY = Only("file", GIVEN, "only for file meshes")
+
+Vec3 = tuple[float, float, float]
 
 
 class ConfigError(Exception):
@@ -50,55 +68,101 @@ class ConfigError(Exception):
 
 @dataclass(frozen=True)
 class GridSpec:
-    size: tuple[float, float]
-    resolution: tuple[int, int]
-    pattern: str = "alternating"
+    """A rectangular grid of vertices in the piece's own u-v plane (local x, y),
+    each quad split into two triangles."""
+    size: tuple[float, float] = setting(doc="[width along u, height along v]", unit="m",
+                                        above=0, what="[width, height] in m")
+    resolution: tuple[int, int] = setting(doc="vertices along u and along v", at_least=2,
+                                          what="[nu, nv] vertices")
+    pattern: str = choice("alternating", GRID_PATTERNS, doc="how the quads are split into "
+                          "triangles: all along one diagonal, or alternating")
 
 
 @dataclass(frozen=True)
 class MeshSpec:
-    grid: GridSpec | None = None
-    file: str | None = None           # absolute path after loading (relative: to the scene file)
-    scale: float = 1.0
-    center: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)   # degrees about x, y, z
+    """The piece's rest shape, a grid or a triangle mesh from a file, and where it
+    is placed: rotated about its bounding-box centre, then moved to `center`."""
+    grid: GridSpec | None = setting(None, doc="a generated grid", one_of="shape")
+    file: str | None = setting(None, doc="an OBJ or PLY (ASCII or binary little-endian) "
+                               "triangle mesh; a relative path is relative to the scene file",
+                               read="mesh_file", one_of="shape")
+    scale: float = setting(1.0, doc="scale factor of a file mesh", above=0, only=FILE_ONLY)
+    center: Vec3 = setting((0.0, 0.0, 0.0), doc="where the bounding-box centre goes", unit="m")
+    rotation: Vec3 = setting((0.0, 0.0, 0.0), doc="rotation about x, then y, then z, applied "
+                             "before the translation", unit="degrees")
 
 
 @dataclass(frozen=True)
 class PinSpec:
-    edge: str | None = None
-    corner: str | None = None
-    indices: tuple[int, ...] | None = None
-    box_min: tuple[float, float, float] | None = None
-    box_max: tuple[float, float, float] | None = None
-    axis: tuple[float, float, float] | None = None   # hold only along this direction (sliding pin)
+    """Vertices held in place, chosen by one selector; with `axis` they are held
+    only along that direction (a sliding pin)."""
+    edge: str | None = choice(None, GRID_EDGES, doc="grids only: a side of the grid (u min, "
+                              "u max, v min, v max in its own coordinates, before rotation)",
+                              one_of="selector")
+    corner: str | None = choice(None, GRID_CORNERS, doc="grids only: a corner of the grid",
+                                one_of="selector")
+    indices: tuple[int, ...] | None = setting(None, doc="vertex indices of this piece, "
+                                              "0 <= i < its vertex count", at_least=0,
+                                              nonempty=True, what="vertex indices",
+                                              one_of="selector")
+    box_min: Vec3 | None = setting(None, key="box.min", doc="the vertices inside this box "
+                                   "(world coordinates after placement): its low corner",
+                                   unit="m", what="[x, y, z] in m", one_of="selector")
+    box_max: Vec3 | None = setting(None, key="box.max", doc="the box's high corner, >= min "
+                                   "in every component", unit="m", what="[x, y, z] in m",
+                                   one_of="selector")
+    axis: Vec3 | None = setting(None, doc="with any selector: hold the vertices only along "
+                                "this direction (S = I - a aᵀ), free across it", nonzero=True)
 
 
 @dataclass(frozen=True)
 class MaterialSpec:
-    model: str = "mass_spring"
-    density: float = 0.1          # kg/m^2
-    stretch: float = 10.0         # N/m
-    shear: float | None = None    # N/m, None: stretch / 10
-    bending: float = 1.0e-6       # N*m
-    damping: float = 0.0          # s
-    # model: fem (seed 000 §3.5-3.6): orthotropic plane stress, moduli times thickness in N/m;
-    # None: E_weft = stretch, E_warp = E_weft, nu_weft = 0.3, nu_warp = nu_weft E_warp / E_weft,
-    # G = E_weft / (2 (1 + nu_weft))
-    E_weft: float | None = None
-    E_warp: float | None = None
-    nu_weft: float | None = None
-    nu_warp: float | None = None
-    G: float | None = None
-    strain: str = "stvk"
-    weft: tuple[float, float, float] = (1.0, 0.0, 0.0)   # weft direction in the placed rest shape
-    bending_model: str | None = None   # None: flexion for mass_spring, dihedral for fem
-    preset: str | None = None     # a named fabric (config/fabrics.py) the other values override
-    # fem + stvk: weft / warp direct stress (N/m) against Green strain, as [[e, S], ...]
-    # from [0, 0], e increasing (seed 000 Part 2 §1.3: measured curves, stiffening)
-    tension_weft: tuple[tuple[float, float], ...] | None = None
-    tension_warp: tuple[tuple[float, float], ...] | None = None
-    shear_curve: tuple[tuple[float, float], ...] | None = None   # shear stress vs shear strain 2E_uv
+    """The piece's material: springs from a membrane stiffness (model: mass_spring,
+    Vassilev et al. 2001 §2.2), or linear triangles in plane stress with the
+    orthotropic law of the EG07 tutorial, Part 1 Eq. 22 (model: fem; moduli are
+    modulus times thickness, in N/m). All pieces of a scene share one material
+    law for now; their densities and bending stiffnesses may differ."""
+    model: str = choice("mass_spring", MATERIAL_MODELS, doc="mass_spring: structural, shear "
+                        "and flexion springs; fem: continuum membrane (EG07 tutorial, Part 1 "
+                        "§3.5-3.6)")
+    density: float = setting(0.1, doc="mass per area", unit="kg/m²", above=0)
+    stretch: float = setting(10.0, doc="uniaxial membrane stiffness Y", unit="N/m", above=0)
+    shear: float | None = setting(None, doc="in-plane shear stiffness G of the springs; null: "
+                                  "stretch / 10", unit="N/m", at_least=0)
+    bending: float = setting(1.0e-6, doc="bending stiffness B", unit="N·m", at_least=0)
+    damping: float = setting(0.0, doc="spring damping: c = damping * k along each spring",
+                             unit="s", at_least=0)
+    E_weft: float | None = setting(None, doc="weft modulus; null: stretch", unit="N/m",
+                                   above=0, only=FEM_ONLY)
+    E_warp: float | None = setting(None, doc="warp modulus; null: E_weft", unit="N/m",
+                                   above=0, only=FEM_ONLY)
+    nu_weft: float | None = setting(None, doc="weft Poisson ratio; null: 0.3", at_least=0,
+                                    only=FEM_ONLY)
+    nu_warp: float | None = setting(None, doc="warp Poisson ratio; null: nu_weft E_warp / "
+                                    "E_weft, the only value that keeps Eq. 22 symmetric; "
+                                    "nu_weft nu_warp < 1", at_least=0, only=FEM_ONLY)
+    G: float | None = setting(None, doc="shear modulus; null: E_weft / (2 (1 + nu_weft))",
+                              unit="N/m", above=0, only=FEM_ONLY)
+    strain: str = choice("stvk", STRAIN_MODELS, doc="stvk: Green strain, St. Venant-Kirchhoff; "
+                         "corotated: Biot strain")
+    weft: Vec3 = setting((1.0, 0.0, 0.0), doc="weft direction in the placed rest shape "
+                         "(projected on each triangle)", nonzero=True)
+    bending_model: str | None = choice(None, BENDING_MODELS, doc="null: flexion for mass_spring "
+                                       "(springs, its only model), dihedral for fem; the hinge "
+                                       "models are compared under Bending models below")
+    preset: str | None = choice(None, tuple(FABRICS), doc="a named fabric "
+                                "(distcloth/config/fabrics.py; values illustrative, no "
+                                "measured source): implies model: fem, every key given "
+                                "overrides it")
+    tension_weft: tuple[tuple[float, float], ...] | None = setting(
+        None, doc="strain: stvk only: weft direct stress against Green strain as [[e, S], ...], "
+        "piecewise linear from [0, 0], both increasing (EG07 tutorial, Part 2 §1: measured "
+        "curves, stiffening)", unit="N/m", read="curve", only=FEM_ONLY)
+    tension_warp: tuple[tuple[float, float], ...] | None = setting(
+        None, doc="the same for the warp direction", unit="N/m", read="curve", only=FEM_ONLY)
+    shear_curve: tuple[tuple[float, float], ...] | None = setting(
+        None, doc="strain: stvk only: shear stress against shear strain 2 E_uv (odd in the "
+        "strain), as [[e, S], ...] like tension_weft", unit="N/m", read="curve", only=FEM_ONLY)
 
     def orthotropic(self) -> tuple[float, float, float, float, float]:
         """(E_weft, E_warp, nu_weft, nu_warp, G) with the defaults filled in."""
@@ -125,100 +189,201 @@ class MaterialSpec:
 
 @dataclass(frozen=True)
 class ClothSpec:
-    name: str
-    mesh: MeshSpec
-    pins: tuple[PinSpec, ...] = ()
-    material: MaterialSpec = field(default_factory=MaterialSpec)
-    thickness: float = 0.001      # m: contact offset of the cloth against colliders
+    """One piece of cloth."""
+    name: str = setting(doc="unique among the pieces", auto="piece{index}")
+    mesh: MeshSpec = setting(doc="rest shape and placement", what="a mapping with grid: or file:")
+    pins: tuple[PinSpec, ...] = setting((), doc="held vertices (a single mapping is a "
+                                        "one-element list)", what="pins")
+    material: MaterialSpec = section(MaterialSpec, doc="the material")
+    thickness: float = setting(0.001, doc="contact offset of the cloth against colliders and "
+                               "itself", unit="m", at_least=0)
 
 
 @dataclass(frozen=True)
 class MotionSpec:
-    """Rigid keyframes of a collider (colliders.RigidMotion): times in s,
-    translations in m, rotations as rotation vectors in rad."""
-    times: tuple[float, ...] = ()
-    translations: tuple[tuple[float, float, float], ...] = ()
-    rotations: tuple[tuple[float, float, float], ...] = ()
+    """Rigid keyframes of a collider: y = R(t) x + p(t) on the shape's
+    coordinates; the pose is held before the first time and after the last."""
+    times: tuple[float, ...] = setting(doc="keyframe times, strictly increasing", unit="s",
+                                       nonempty=True, what="increasing times in s")
+    translations: tuple[Vec3, ...] = setting((), doc="p at each time, linear in between; "
+                                             "default zeros", unit="m",
+                                             what="[x, y, z] vectors (one per time)")
+    rotations: tuple[Vec3, ...] = setting((), doc="R at each time as a rotation vector (axis "
+                                          "times angle), slerp along the shortest arc in "
+                                          "between; default zeros", unit="rad",
+                                          what="[x, y, z] vectors (one per time)")
+
+
+@dataclass(frozen=True)
+class ColliderGeometry:
+    """The geometry keys of the analytic shapes, written in the collider's own
+    mapping; each shape takes exactly its own (SHAPE_KEYS)."""
+    normal: Vec3 | None = setting(None, doc="plane: normal (normalised on use); normal · y < "
+                                  "offset is inside", nonzero=True, what="[x, y, z], non-zero")
+    offset: float | None = setting(None, doc="plane: normal · y = offset on the plane",
+                                   unit="m", what="a number in m (normal . y = offset)")
+    center: Vec3 | None = setting(None, doc="sphere, box: centre", unit="m",
+                                  what="[x, y, z] in m")
+    radius: float | None = setting(None, doc="sphere, capsule: radius", unit="m", above=0,
+                                   what="a number > 0 in m")
+    a: Vec3 | None = setting(None, doc="capsule: one end of the segment", unit="m",
+                             what="[x, y, z] in m")
+    b: Vec3 | None = setting(None, doc="capsule: the other end", unit="m", what="[x, y, z] in m")
+    half_extents: Vec3 | None = setting(None, doc="box: half sizes along x, y, z (axis-aligned "
+                                        "in the body frame)", unit="m", above=0,
+                                        what="[x, y, z], each > 0, in m")
 
 
 @dataclass(frozen=True)
 class ColliderSpec:
-    name: str
-    shape: str
-    geometry: tuple[tuple[str, Any], ...]    # the shape's keys (SHAPE_KEYS) and values
-    friction: float = 0.0
-    thickness: float = 0.0
-    motion: MotionSpec | None = None
-    # mesh colliders only: a deforming sequence is one file per frame at frame_rate
-    files: tuple[str, ...] = ()
-    frame_rate: float | None = None
-    scale: float = 1.0
-    method: str = "bvh"
-    resolution: tuple[int, int] = (256, 256)   # image-space map size (pixels)
-    axis: str = "z"                            # image-space projection axis
+    """A rigid or deforming body the cloth collides with (collisions effect):
+    checked even without the effect, used only with it. Contact when the
+    distance phi < d = the cloth's thickness + the collider's."""
+    name: str = setting(doc="unique among the colliders", auto="collider{index}")
+    shape: str = choice(MISSING, COLLIDER_SHAPES, doc="the body: each shape takes the geometry "
+                        "keys that name it below (all required) and no others; mesh also "
+                        "takes the keys marked 'only with shape: mesh'")
+    geometry: tuple[tuple[str, Any], ...] = setting(doc="the shape's keys and values",
+                                                    inline=ColliderGeometry)
+    friction: float = setting(0.0, doc="Coulomb coefficient mu (0: frictionless)", at_least=0)
+    thickness: float = setting(0.0, doc="added to the cloth's thickness for the contact "
+                               "distance d", unit="m", at_least=0)
+    files: tuple[str, ...] = setting((), key="file", doc="mesh: an OBJ or PLY triangle mesh "
+                                     "(relative to the scene file), or a list of them: a "
+                                     "deforming sequence with the same triangles, one file per "
+                                     "frame; a closed mesh has an inside, an open one is "
+                                     "two-sided", read="mesh_files", only=MESH_ONLY,
+                                     what="an OBJ or PLY file, or a list of them (one per "
+                                     "frame)")
+    frame_rate: float | None = setting(None, doc="mesh: frames per second of a sequence "
+                                       "(needed with a list of files, refused with one)", unit="1/s", above=0,
+                                       only=MESH_ONLY)
+    scale: float = setting(1.0, doc="mesh: scale factor", above=0, only=MESH_ONLY)
+    method: str = choice("bvh", COLLIDER_METHODS, doc="mesh: bvh (BVH closest points for "
+                         "contact constraints, vertex-face and edge-edge CCD impulses) or image "
+                         "(depth, normal and velocity maps, Vassilev et al. 2001 §4, Eq. 15 "
+                         "response)", only=MESH_ONLY)
+    resolution: tuple[int, int] = setting((256, 256), doc="image-space map size", unit="pixels",
+                                          at_least=8, at_most=8192, only=IMAGE_ONLY)
+    axis: str = choice("z", IMAGE_AXES, doc="image-space projection axis", only=IMAGE_ONLY)
+    motion: MotionSpec | None = setting(None, doc="rigid keyframes; null: at rest")
 
 
 @dataclass(frozen=True)
 class TimeSpec:
-    end: float = 1.0
-    step: float = 0.01
-    integrator: str = "backward_euler"
-    newton_iterations: int = 1
-    newton_tolerance: float = 1.0e-8
-    newmark_beta: float = 0.25    # Newmark's beta and gamma (average acceleration by default)
-    newmark_gamma: float = 0.5
-    adaptive: bool = False        # halve h and retry a rejected step
-    max_halvings: int = 6
-    max_strain: float | None = None   # reject a step whose largest membrane strain (stretch - 1) exceeds it
-    energy_guard: bool = True         # reject a step that gains energy in a passive scene (energy_guard.py)
-    max_energy_gain: float = 0.1      # ... beyond E_ref + this * S
-    require_newton_convergence: bool = False   # reject a step whose Newton loop ran out of iterations
+    """Time stepping: span, integrator, Newton iterations and step health (a
+    rejected step is retried at h/2 with adaptive, else the run stops)."""
+    end: float = setting(1.0, doc="simulated time", unit="s", above=0)
+    step: float = setting(0.01, doc="time step h, <= end", unit="s", above=0)
+    integrator: str = choice("backward_euler", INTEGRATORS, doc="implicit: backward_euler, bdf2, "
+                             "implicit_midpoint, newmark; explicit: symplectic_euler, "
+                             "explicit_midpoint, rk4")
+    newton_iterations: int = setting(1, doc="Newton iterations per step; 1 is Baraff and "
+                                     "Witkin's single linearised step", at_least=1,
+                                     at_most=MAX_NEWTON_ITERATIONS)
+    newton_tolerance: float = setting(1.0e-8, doc="relative residual force norm that stops "
+                                      "Newton early", above=0)
+    newmark_beta: float = setting(0.25, doc="Newmark's beta (1/4: average acceleration)",
+                                  at_least=0, at_most=0.5)
+    newmark_gamma: float = setting(0.5, doc="Newmark's gamma (1/2: second order, no numerical "
+                                   "damping)", above=0, at_most=1)
+    adaptive: bool = setting(False, doc="retry a rejected step (failed solve, NaN, blow-up, "
+                             "strain bound, energy gain) as two steps of h/2")
+    max_halvings: int = setting(6, doc="how many times adaptive may halve a step", at_least=1,
+                                at_most=30)
+    max_strain: float | None = setting(None, doc="reject a step whose largest membrane strain "
+                                       "(stretch - 1 of a structural spring, principal stretch "
+                                       "- 1 of an FE triangle) exceeds this; null: no bound",
+                                       above=0)
+    energy_guard: bool = setting(True, doc="reject a step that leaves a passive scene with "
+                                 "more than E_ref + max_energy_gain * S of energy (Step health)")
+    max_energy_gain: float = setting(0.1, doc="the guard's margin, a fraction of S = KE + "
+                                     "|U_elastic| + M |g| L at the reference", above=0)
+    require_newton_convergence: bool = setting(False, doc="true: a step whose Newton loop ends "
+                                               "above newton_tolerance is rejected; false: "
+                                               "accepted, counted in newton_unconverged")
+
+
+@dataclass(frozen=True)
+class LinearSystemSpec:
+    """distcloth's own settings of the implicit solve (the PETSc options are under
+    solver:). On the command line: -distcloth_<key> <value>, e.g.
+    -distcloth_mat_type aij."""
+    mat_type: str = choice("baij", MAT_TYPES, doc="PETSc matrix type, block size 3 either way "
+                           "(PETSc's GAMG needs aij)")
+    warm_start: bool = setting(False, doc="start each solve from the previous step's solution")
+    pc_rebuild_every: int = setting(1, doc="rebuild the preconditioner every k-th solve, reuse "
+                                    "it in between", at_least=1)
 
 
 @dataclass(frozen=True)
 class DrapeSpec:
-    """``distcloth drape`` (seed 004): relaxation to the rest state."""
-    method: str = "stop_and_go"
-    stop_on: str = "potential"    # zero all velocities at a potential-energy minimum, or a kinetic maximum
-    tolerance: float = 1.0e-3     # stop when every free vertex's force <= tolerance * its weight
-    max_iterations: int = 2000
-    frame_every: int = 10         # iterations between frames
+    """`distcloth drape`: relaxation to the rest state (Volino and
+    Magnenat-Thalmann 2007; docs/drape.md)."""
+    method: str = choice("stop_and_go", DRAPE_METHODS, doc="stop_and_go: dynamics with every "
+                         "velocity zeroed at an energy extremum; dynamic, quasistatic, newton: "
+                         "see docs/drape.md")
+    stop_on: str = choice("potential", DRAPE_STOP_ON, doc="stop_and_go: zero the velocities at "
+                          "a potential-energy minimum, or at a kinetic-energy maximum")
+    tolerance: float = setting(1.0e-3, doc="done when every free vertex's force is at most "
+                               "this times its weight", above=0)
+    max_iterations: int = setting(2000, doc="iterations before giving up", at_least=1)
+    frame_every: int = setting(10, doc="iterations between frames", at_least=1)
 
 
 @dataclass(frozen=True)
 class StealSpec:
-    """Load balancing of the collision traversal (seed 000 Part 1 §5.8.2;
-    distcloth/parallel/steal.py).  Off: the static top-level assignment."""
-    enabled: bool = True
-    a: float = 2.0               # task creation threshold tau = a * sigma + b (sigma: pool size)
-    b: float = 8.0
-    chunk: int = 256             # traversal tests between two polls for steal requests
+    """Load balance of the collision BVH traversal (EG07 tutorial, Part 1
+    §5.8.2; distcloth/parallel/steal.py), used only when a mesh collider (bvh)
+    or self_collision builds one; docs/benchmarks.md: what works here."""
+    enabled: bool = setting(True, doc="false: the static assignment of the top-level tasks")
+    a: float = setting(2.0, doc="a new task when the stack holds more than tau = a * pool "
+                       "size + b tests", at_least=0)
+    b: float = setting(8.0, doc="the constant of tau", at_least=1)
+    chunk: int = setting(256, doc="traversal tests between two polls for steal requests",
+                         at_least=1)
 
 
 @dataclass(frozen=True)
 class OutputSpec:
-    file: str = "out/result.h5"
-    every: float = 0.1
-    preview: bool = True
+    """The result file and its frames."""
+    file: str = setting("out/result.h5", doc="HDF5 result, relative to the current directory; "
+                        "its directory is created", read="output_file")
+    every: float = setting(0.1, doc="time between frames, >= time.step (rounded to a whole "
+                           "number of steps)", unit="s", above=0)
+    preview: bool = setting(True, doc="PNG pictures and plots beside the HDF5 file")
 
 
 @dataclass(frozen=True)
 class SceneConfig:
-    scene: str
-    cloth: tuple[ClothSpec, ...]
-    effects: tuple[str, ...] = ("gravity", "membrane", "bending")
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
-    drag: float = 0.0
-    time: TimeSpec = field(default_factory=TimeSpec)
-    solver: tuple[tuple[str, Any], ...] = tuple(DEFAULT_SOLVER.items())   # PETSc options (no prefix)
-    mat_type: str = "baij"
-    warm_start: bool = False       # start each solve from the previous step's solution
-    pc_rebuild_every: int = 1      # rebuild the preconditioner every k-th solve, reuse it between
-    output: OutputSpec = field(default_factory=OutputSpec)
-    drape: DrapeSpec = field(default_factory=DrapeSpec)
-    work_stealing: StealSpec = field(default_factory=StealSpec)
-    colliders: tuple[ColliderSpec, ...] = ()
-    source_text: str = ""          # the resolved config as YAML, for the output file
+    """A scene: cloth pieces, the effects acting on them, time stepping, the
+    linear solve, output and colliders."""
+    scene: str = setting(doc="free-text name", auto="{stem}")
+    cloth: tuple[ClothSpec, ...] = setting(doc="the pieces (a single mapping is a one-piece "
+                                           "list)", nonempty=True, what="cloth pieces")
+    effects: tuple[str, ...] = choice(("gravity", "membrane", "bending"), EFFECTS,
+                                      doc="the forces and stages: collisions needs at least "
+                                      "one collider; self_collision uses each piece's "
+                                      "thickness", what="effect names")
+    gravity: Vec3 = setting((0.0, 0.0, -9.81), doc="gravitational acceleration (z is up)",
+                            unit="m/s²")
+    drag: float = setting(0.0, doc="air drag: f = -drag * area * v per vertex", unit="N·s/m³",
+                          at_least=0)
+    time: TimeSpec = section(TimeSpec, doc="time stepping")
+    solver: tuple[tuple[str, Any], ...] = setting(
+        tuple(DEFAULT_SOLVER.items()), doc="PETSc options without the leading '-' and without "
+        f"the prefix {OPTION_PREFIX}, which distcloth adds (ksp_rtol: 1e-8 is "
+        f"-{OPTION_PREFIX}ksp_rtol 1e-8); they replace or extend the defaults", read="petsc_options")
+    linear_system: LinearSystemSpec = section(LinearSystemSpec, doc="distcloth's own settings "
+                                              "of the linear solve")
+    output: OutputSpec = section(OutputSpec, doc="the result file")
+    drape: DrapeSpec = section(DrapeSpec, doc="relaxation by distcloth drape")
+    colliders: tuple[ColliderSpec, ...] = setting((), doc="bodies the cloth collides with",
+                                                  what="colliders, each a mapping with name "
+                                                  "and shape")
+    work_stealing: StealSpec = section(StealSpec, doc="load balance of the collision traversal")
+    source_text: str = setting("", doc="the resolved configuration as YAML, for the output "
+                               "file", internal=True)
 
     def has(self, effect: str) -> bool:
         return effect in self.effects

@@ -1,14 +1,11 @@
-"""Time integrators behind one interface: ``step(sim, h, constraints) -> StepResult``.
-
-An integrator reads the committed state ``sim.x, sim.v`` (local rows, ghosts
-valid), may evaluate forces as often as it needs through ``sim.forces``, and
-returns the proposed new owned state without committing it: the driver's
-acceptance hooks may still reject the step; ``accepted()`` is called when
-the driver commits it (multistep schemes keep their history there).
-"""
+"""Time integrators behind one interface (``integrate/base.py``):
+``step(ctx, state, h, constraints) -> StepResult``; relaxation to rest in
+``integrate/drape.py``."""
 from .base import StepResult
 from .explicit import RK4, ExplicitMidpoint, SymplecticEuler
 from .implicit import BDF2, BackwardEuler, ImplicitMidpoint, Newmark
+
+__all__ = ["StepResult", "INTEGRATORS", "make_integrator"]
 
 INTEGRATORS = {
     "backward_euler": BackwardEuler,

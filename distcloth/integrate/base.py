@@ -1,4 +1,15 @@
-"""What an integrator returns for one step."""
+"""The integrator interface: ``step(ctx, state, h, constraints) -> StepResult``.
+
+An integrator reads the committed state (``state.x``, ``state.v``: local
+rows, ghosts valid; ``state.history`` for multistep schemes) and does
+everything else through the step context (``distcloth/step_context.py``):
+force evaluations (as often as it needs), stiffness products, assembly, the
+constrained solve, ghost exchanges and global norms.  It proposes the new
+owned rows without committing them, and says in its result what the rest of
+the step needs: the forces at the start state, how positions follow a
+velocity change made after the solve, and the history a multistep scheme
+keeps if the driver commits the step.
+"""
 from __future__ import annotations
 
 import math
@@ -6,11 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..state import MultistepHistory
+
 
 @dataclass
 class StepResult:
     x: np.ndarray                 # (n_owned, 3) proposed positions
     v: np.ndarray                 # (n_owned, 3) proposed velocities
+    start_forces: np.ndarray      # (n_local, 3) forces at the start state (contact response)
+    position_gain: float          # dx1/dv1: positions follow a post-solve velocity change by it
+    history: MultistepHistory | None = None   # kept by the state if the step is committed
     newton_iterations: int = 0
     ksp_iterations: int = 0       # summed over the step's solves
     ksp_residual: float = 0.0     # largest true relative residual of the step's solves
@@ -25,8 +41,5 @@ class Integrator:
     def __init__(self, cfg):
         self.cfg = cfg
 
-    def step(self, sim, h: float, cons) -> StepResult:
+    def step(self, ctx, state, h: float, cons) -> StepResult:
         raise NotImplementedError
-
-    def accepted(self) -> None:
-        """The driver committed the last proposed step."""

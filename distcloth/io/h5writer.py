@@ -1,4 +1,4 @@
-"""The run's HDF5 result file, written collectively by all ranks (DESIGN §7).
+"""The run's HDF5 result file, written collectively by all ranks.
 
 Layout (every array in *input* vertex order, whatever the partition)::
 
@@ -18,7 +18,9 @@ Layout (every array in *input* vertex order, whatever the partition)::
 
 Collective protocol
 -------------------
-Under MPI the file is opened with h5py's ``mpio`` driver, and then *every*
+``comm`` is the communicator wrapper of ``distcloth/parallel/comm.py`` (or
+None for a serial run).  Under MPI the file is opened with h5py's ``mpio``
+driver on its communicator, and then *every*
 method of :class:`ResultWriter` (the constructor, ``write_frame``,
 ``write_step``, ``record_error``, ``close``) is collective: all ranks call it,
 in the same order, with the same scalar arguments (only ``positions_owned``
@@ -29,8 +31,7 @@ metadata (attrs, names, error message) rather than trusting the caller.
 
 Errors: a rank that meets an error must not call ``record_error``/``close``
 alone, since the other ranks are elsewhere and the collective would hang.
-The caller agrees first (e.g. allreduce a flag, bcast the message from the
-failing rank), then *all* ranks call ``record_error(step, message)`` and
+The caller agrees first (``comm.agree``), then *all* ranks call ``record_error(step, message)`` and
 ``close()``.  As a context manager, ``__exit__`` closes normally when the
 block ends without an exception, and on an exception it does the
 record-error-and-close sequence only when that is safe: in a serial run, or
@@ -38,7 +39,7 @@ when the exception is collective (a :class:`CollectiveError`, or any
 exception with a true ``collective`` attribute, raised on every rank after
 such an agreement).  For any other exception it makes no collective call at
 all: the file stays as last flushed (status 'running', earlier frames
-readable) and the caller is expected to ``comm.Abort()``; closing there could
+readable) and the caller is expected to ``comm.abort()``; closing there could
 deadlock against ranks that did not raise.
 """
 from __future__ import annotations
@@ -49,7 +50,7 @@ from typing import Any, Mapping, Sequence
 
 import h5py
 import numpy as np
-from h5py import h5p, h5s
+from h5py import h5fd, h5p, h5s
 
 from distcloth.io.xdmf import XdmfAttribute, write_xdmf
 
@@ -92,16 +93,17 @@ class CollectiveError(RuntimeError):
 
 
 class _SerialComm:
-    """Stand-in for a communicator of one rank (comm=None)."""
+    """Stand-in for the communicator wrapper of a serial run (comm=None)."""
     rank = 0
     size = 1
+    mpi_comm = None
 
     @staticmethod
-    def bcast(obj, root=0):
+    def broadcast(obj, root=0):
         return obj
 
     @staticmethod
-    def Barrier():
+    def synchronize():
         pass
 
 
@@ -213,7 +215,7 @@ class ResultWriter:
 
         # Everything that becomes HDF5 metadata must be identical on all
         # ranks: take rank 0's copy.
-        config_text, attrs, stage_names, diagnostic_names = self._comm.bcast(
+        config_text, attrs, stage_names, diagnostic_names = self._comm.broadcast(
             (str(config_text), dict(attrs), list(stage_names), list(diagnostic_names)), root=0)
         for name in stage_names:
             _check_name("stage", name)
@@ -244,7 +246,6 @@ class ResultWriter:
 
         if self._mpio:
             self._dxpl = h5p.create(h5p.DATASET_XFER)
-            from h5py import h5fd
             self._dxpl.set_dxpl_mpio(h5fd.MPIO_COLLECTIVE)
         else:
             self._dxpl = None
@@ -252,9 +253,9 @@ class ResultWriter:
         parent = os.path.dirname(self.path)
         if self.rank == 0:
             os.makedirs(parent, exist_ok=True)
-        self._comm.Barrier()   # the directory exists before anyone opens
+        self._comm.synchronize()   # the directory exists before anyone opens
         if self._mpio:
-            self._file = h5py.File(self.path, "w", driver="mpio", comm=comm)
+            self._file = h5py.File(self.path, "w", driver="mpio", comm=self._comm.mpi_comm)
         else:
             self._file = h5py.File(self.path, "w")
         f = self._file
@@ -442,7 +443,7 @@ class ResultWriter:
     def record_error(self, step: int, message: str) -> None:
         """Collective: mark the run failed at ``step`` (rank 0's arguments are used)."""
         self._require_open()
-        step, message = self._comm.bcast((int(step), str(message)), root=0)
+        step, message = self._comm.broadcast((int(step), str(message)), root=0)
         self._flush_steps()
         f = self._file
         f.attrs["status"] = "failed"

@@ -1,4 +1,4 @@
-"""Pre-filtered constraints (Baraff and Witkin 1998, §5.3; DESIGN.md §4.5).
+"""Pre-filtered constraints (Baraff and Witkin 1998, §5.3).
 
 A constraint on vertex i is a 3x3 projection S_i onto its free directions and
 a prescribed velocity change z_i in the constrained ones (a pin: S = 0; a

@@ -3,7 +3,7 @@
 Rows are the owned vertices, columns local vertices (owned and ghosts), one
 3x3 block per coupled pair.  Force terms get, once, the positions in the
 value array where their blocks go; each step only scatters values there
-(seed 000 Part 1 §5.7: blocked 3x3 storage).  No PETSc here: the same
+(EG07 tutorial, Part 1 §5.7: blocked 3x3 storage).  No PETSc here: the same
 arrays feed PETSc (through global column numbers) and the local products the
 constraint filter needs.
 """

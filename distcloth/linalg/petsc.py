@@ -4,14 +4,19 @@ Options come from two places: the scene's ``solver:`` section and the
 command line.  The command line wins: a scene value is inserted only when the
 command line did not set the same option.  Every option under the prefix
 must be used by the time the solver is set up, otherwise it is a typo or a
-setting for another solver type and the run is refused.
+setting for another solver type and the run is refused.  distcloth's own
+settings written like options (``-distcloth_mat_type aij``) are taken out
+first (:func:`take_options`): they go to the scene configuration.
 """
 from __future__ import annotations
 
 import ctypes
 import sys
+from collections.abc import Iterable
 
-PREFIX = "distcloth_"
+import petsc4py
+
+from ..config.schema import OPTION_PREFIX as PREFIX
 
 # Read by KSPSolve itself, after set-up: cannot be 'used' before the first solve.
 SOLVE_TIME_OPTIONS = {
@@ -28,16 +33,25 @@ _initialised = False
 def init_petsc(argv=None):
     """Initialise petsc4py with the PETSc options of the command line (once)."""
     global _initialised
-    import petsc4py
     if not _initialised:
         petsc4py.init([sys.argv[0] if sys.argv else "distcloth"] + list(argv or []))
         _initialised = True
+    return petsc()
+
+
+def petsc():
+    """The petsc4py.PETSc module (initialised without command-line options if
+    ``init_petsc`` was not called first)."""
+    # not imported at the top of any module: PETSc reads its command line when
+    # it is first imported, so the command line can start it only if nothing
+    # imported it before init_petsc
     from petsc4py import PETSc
     return PETSc
 
 
-def _libpetsc():
-    from petsc4py import PETSc  # noqa: F401  (loads the library first)
+def libpetsc():
+    """The PETSc shared library, for the few calls petsc4py 3.18 does not wrap."""
+    petsc()      # loads the library first
     for name in ("libpetsc_real.so.3.18", "libpetsc_real.so", "libpetsc.so"):
         try:
             return ctypes.CDLL(name, mode=ctypes.RTLD_GLOBAL)
@@ -49,7 +63,7 @@ def _libpetsc():
 def insert_scene_options(options: dict, from_command_line: set[str]) -> list[str]:
     """Put the scene's solver options into the database unless the command line
     set them; returns the names inserted, for ``remove_options`` when done."""
-    from petsc4py import PETSc
+    PETSc = petsc()
     db = PETSc.Options()
     inserted = []
     for key, value in options.items():
@@ -65,23 +79,39 @@ def insert_scene_options(options: dict, from_command_line: set[str]) -> list[str
 def remove_options(names: list[str]) -> None:
     """Take a scene's options out again (dolfinx's rule: insert, apply, remove),
     so a later scene in the same process starts from the command line only."""
-    from petsc4py import PETSc
+    PETSc = petsc()
     db = PETSc.Options()
     for name in names:
         if db.hasName(name):
             db.delValue(name)
 
 
+def take_options(names: Iterable[str]) -> dict[str, str]:
+    """Remove ``-distcloth_<name>`` for each of ``names`` from the database and
+    return what was given (name -> value text; a bare flag is 'true', as
+    PETSc reads it)."""
+    PETSc = petsc()
+    db = PETSc.Options()
+    given = db.getAll()
+    taken = {}
+    for name in names:
+        if PREFIX + name in given:
+            value = given[PREFIX + name]
+            taken[name] = "true" if value is None else value
+            db.delValue(PREFIX + name)
+    return taken
+
+
 def command_line_options() -> set[str]:
     """Names (without prefix) of the prefixed options present before the scene's are inserted."""
-    from petsc4py import PETSc
+    PETSc = petsc()
     return {k[len(PREFIX):] for k in PETSc.Options().getAll() if k.startswith(PREFIX)}
 
 
 def unused_options() -> list[str]:
     """Prefixed options nobody read (PetscOptionsUsed, through ctypes: petsc4py 3.18 lacks it)."""
-    from petsc4py import PETSc
-    lib = _libpetsc()
+    PETSc = petsc()
+    lib = libpetsc()
     if lib is None:
         return []
     used = ctypes.c_int(0)
@@ -97,5 +127,5 @@ def unused_options() -> list[str]:
 
 def current_options() -> dict[str, str]:
     """Every option under the prefix now in the database (name without prefix -> value)."""
-    from petsc4py import PETSc
+    PETSc = petsc()
     return {k[len(PREFIX):]: v for k, v in PETSc.Options().getAll().items() if k.startswith(PREFIX)}

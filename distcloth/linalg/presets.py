@@ -1,17 +1,18 @@
 """The preconditioners distcloth measures and offers by name: PETSc options
-(without prefix) and the matrix type they need.
+(without prefix, the scene's ``solver:``) and the matrix type they need (the
+scene's ``linear_system.mat_type``).
 
 The AMG settings are the best of a small sweep on the 100k-vertex case
 (docs/benchmarks.md, scripts/bench_step.py): GAMG with one symmetric-SOR
 sweep per level and a 0.02 aggregation threshold, hypre BoomerAMG with HMIS
 coarsening and ext+i interpolation; both on AIJ (PETSc's GAMG cannot build
-its graph from BAIJ). ``sgs32`` is seed 000 §5.7's reference preconditioner
-with a float32 matrix (distcloth/linalg/sgs32.py).
+its graph from BAIJ). ``sgs32`` is the reference preconditioner of the EG07
+tutorial, Part 1 §5.7, with a float32 matrix (distcloth/linalg/sgs32.py).
 """
 from __future__ import annotations
 
 PRECONDITIONERS = {
-    # name: (PETSc options, mat_type)
+    # name: (solver options, linear_system.mat_type)
     "jacobi": ({"pc_type": "jacobi"}, "baij"),
     "bjacobi_sgs": ({"pc_type": "bjacobi", "sub_pc_type": "sor"}, "baij"),
     "sgs32": ({"pc_type": "python",

@@ -1,6 +1,6 @@
 """Single-precision block symmetric Gauss-Seidel, block Jacobi over the ranks.
 
-Seed 000 Part 1 §5.7: the SpMV and the preconditioner are bound by memory
+EG07 tutorial, Part 1 §5.7: the SpMV and the preconditioner are bound by memory
 traffic, so storing the matrix in single precision halves the data moved.
 Debian's PETSc is double only, so this is a petsc4py Python PC: each rank
 keeps a float32 copy of its diagonal block (the owned rows and columns of

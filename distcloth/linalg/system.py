@@ -1,6 +1,6 @@
 """The implicit system in PETSc: fixed-pattern blocked matrix, KSP, checks.
 
-The matrix is BAIJ with 3x3 blocks by default (seed 000 Part 1 §5.7), or AIJ
+The matrix is BAIJ with 3x3 blocks by default (EG07 tutorial, Part 1 §5.7), or AIJ
 with block size 3 (needed by GAMG); both are filled through the same blocked
 CSR call from the pattern's value array.  Its sparsity is preallocated
 exactly and frozen (NEW_NONZERO_ALLOCATION_ERR): every step only overwrites
@@ -8,16 +8,18 @@ values.  Rows are set only by their owner (NO_OFF_PROC_ENTRIES), so assembly
 sends nothing.
 
 Default solver: CG preconditioned by block Jacobi over the ranks with SOR on
-each rank's diagonal block (seed 000 §5.6).  PETSc's BAIJ SOR allows only
+each rank's diagonal block (EG07 tutorial, Part 1 §5.6).  PETSc's BAIJ SOR allows only
 omega = 1, so the sub-preconditioner is symmetric Gauss-Seidel.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import ctypes
+
 import numpy as np
 
-from .petsc import PREFIX, _libpetsc
+from .petsc import PREFIX, libpetsc, petsc
 from .sgs32 import ATTR
 
 
@@ -33,11 +35,10 @@ class SolveInfo:
 
 
 class LinearSystem:
-    def __init__(self, layout, pattern, mat_type: str = "baij", warm_start: bool = False,
+    def __init__(self, layout, pattern, comm, mat_type: str = "baij", warm_start: bool = False,
                  pc_rebuild_every: int = 1):
-        from petsc4py import PETSc
-        self.PETSc = PETSc
-        self.comm = PETSc.COMM_WORLD
+        PETSc = petsc()
+        self.comm = comm.mpi_comm
         self.pattern = pattern
         n, N = layout.n_owned, int(layout.ownership[-1])
         self.n_owned = n
@@ -74,7 +75,6 @@ class LinearSystem:
         self.r = A.createVecLeft()
         self.ksp = PETSc.KSP().create(self.comm)
         self.ksp.setOptionsPrefix(PREFIX)
-        self._configured = False
 
     def set_values(self, data: np.ndarray) -> None:
         self.A.setValuesBlockedCSR(self.indptr, self.gcols,
@@ -93,7 +93,6 @@ class LinearSystem:
         ksp.setUp()
         if ksp.getPC().getType() == "bjacobi":
             ksp.setUpOnBlocks()
-        self._configured = True
 
     def block_jacobi_blocks(self) -> int:
         """Local number of block-Jacobi blocks (0 if another preconditioner is in use)."""
@@ -106,7 +105,7 @@ class LinearSystem:
         pc = self.ksp.getPC()
         sub = ""
         if pc.getType() == "bjacobi":
-            opts = self.PETSc.Options()
+            opts = petsc().Options()
             sub = "/" + opts.getString(PREFIX + "sub_pc_type", "ilu")
         return (f"{self.ksp.getType()} + {pc.getType()}{sub}, {self.mat_type} matrix, "
                 f"rtol {self.ksp.getTolerances()[0]:g}, norm {_norm_name(self.ksp.getNormType())}"
@@ -145,9 +144,8 @@ class LinearSystem:
 
 def bjacobi_local_blocks(pc) -> int:
     """PCBJacobiGetSubKSP's local block count (petsc4py 3.18 does not wrap it)."""
-    import ctypes
-    from petsc4py import PETSc
-    lib = _libpetsc()
+    PETSc = petsc()
+    lib = libpetsc()
     itype = ctypes.c_int64 if np.dtype(PETSc.IntType).itemsize == 8 else ctypes.c_int32
     n, first, ksps = itype(0), itype(0), ctypes.c_void_p(0)
     err = lib.PCBJacobiGetSubKSP(ctypes.c_void_p(pc.handle), ctypes.byref(n), ctypes.byref(first),
@@ -158,7 +156,7 @@ def bjacobi_local_blocks(pc) -> int:
 
 
 def _norm_name(norm: int) -> str:
-    from petsc4py import PETSc
+    PETSc = petsc()
     for name in ("NONE", "PRECONDITIONED", "UNPRECONDITIONED", "NATURAL"):
         if getattr(PETSc.KSP.NormType, name) == norm:
             return name.lower()
@@ -166,7 +164,7 @@ def _norm_name(norm: int) -> str:
 
 
 def _reason_name(reason: int) -> str:
-    from petsc4py import PETSc
+    PETSc = petsc()
     for name in dir(PETSc.KSP.ConvergedReason):
         if not name.startswith("_") and getattr(PETSc.KSP.ConvergedReason, name) == reason:
             return name

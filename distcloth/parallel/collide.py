@@ -1,6 +1,6 @@
 """Distributed collision detection over the replicated global BVH.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §5.8.2: every rank holds the
+EG07 tutorial, Part 1 §5.8.2: every rank holds the
 whole hierarchy (its own sub-mesh tree plus everybody else's, combined at
 the top), so one all-gather of positions per collision phase is all the
 communication detection needs before each copy is refitted; the top-level
@@ -9,7 +9,7 @@ volumes overlap, a sub-mesh against each collider) are the tasks.  Each
 starts on the rank CollisionGeometry.static_owner gives it; with
 ``stealing`` (the default) the ranks then balance the traversal by task
 creation and receiver-initiated round-robin work stealing
-(distcloth/parallel/steal.py, seed 000 Part 1 §5.8.2), otherwise every rank
+(distcloth/parallel/steal.py, EG07 tutorial, Part 1 §5.8.2), otherwise every rank
 runs exactly its own tasks.
 
 Each rank runs its tasks, turns the triangle pairs into vertex-face and
@@ -17,7 +17,8 @@ edge-edge candidates (the narrow phase runs where the task ran) and the
 candidates are all-gathered, sorted and de-duplicated, so every rank
 holds the same canonical set: the response that follows is computed from
 identical data on every rank and never depends on which rank found a pair
-or in which order (determinism, issue 4 §5).
+or in which order (so the same rank count gives bitwise identical
+results, docs/collisions.md).
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ import time
 import numpy as np
 
 from ..collision.geometry import CollisionGeometry
+from ..collision.impulses import collisions
 from ..collision.proximity import edge_edge_contacts, vertex_face_contacts
 from ..collision.traverse import unique_rows
 from ..collision.tritri import CROSSING_COPLANAR_TOL, tri_tri_batch
@@ -162,7 +164,6 @@ class DistributedCollisions:
         numbers and put back in row order: every rank gets the serial
         result, bitwise, for 1/P of the work (the narrow phase was two thirds
         of a pile-up step when every rank ran it all)."""
-        from ..collision.impulses import collisions
         p, r = self.comm.size, self.comm.rank
         if p == 1:
             return collisions(x0, x1, tri, edges, vf, ee, eta)

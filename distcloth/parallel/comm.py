@@ -1,4 +1,7 @@
-"""The few collective operations the driver needs, so nothing else imports MPI.
+"""The communicator wrapper: the collectives the driver, the writer and the
+studies need, on the communicator it was given (MPI_COMM_WORLD by default),
+so that nothing outside ``distcloth/parallel/`` imports MPI or calls a raw
+collective and a run can live on a sub-communicator.
 
 Errors are agreed collectively: every rank reports (ok, message) and all
 ranks learn the first failure in rank order, so they stop together and no
@@ -10,62 +13,67 @@ import os
 import sys
 
 import numpy as np
+from mpi4py import MPI
+
+from .partition import partition_vertices
 
 
 class Comm:
-    def __init__(self):
-        from mpi4py import MPI
+    def __init__(self, mpi_comm=None):
+        self.mpi_comm = MPI.COMM_WORLD if mpi_comm is None else mpi_comm
         self.MPI = MPI
-        self.comm = MPI.COMM_WORLD
-        self.rank = self.comm.Get_rank()
-        self.size = self.comm.Get_size()
+        self.rank = self.mpi_comm.Get_rank()
+        self.size = self.mpi_comm.Get_size()
 
     @property
     def under_mpiexec(self) -> bool:
+        """Started by mpiexec (Debian's h5py then loads its MPI build)."""
         return "OMPI_COMM_WORLD_SIZE" in os.environ or "PMIX_RANK" in os.environ
 
-    @property
-    def mpi_comm(self):
-        return self.comm
+    def broadcast(self, obj, root: int = 0):
+        """Rank ``root``'s Python object on every rank."""
+        return self.mpi_comm.bcast(obj, root=root)
 
-    def bcast(self, obj, root=0):
-        return self.comm.bcast(obj, root=root)
-
-    def barrier(self):
-        self.comm.Barrier()
+    def synchronize(self) -> None:
+        """Wait until every rank got here."""
+        self.mpi_comm.Barrier()
 
     def agree(self, error: str | None) -> tuple[int, str] | None:
-        """Collective: (rank, message) of the lowest failing rank, or None if all are fine."""
-        errors = self.comm.allgather(error)
+        """(rank, message) of the lowest failing rank, or None if all are fine."""
+        errors = self.mpi_comm.allgather(error)
         for r, e in enumerate(errors):
             if e is not None:
                 return r, e
         return None
 
     def sum(self, values: np.ndarray) -> np.ndarray:
+        """Elementwise sum over the ranks."""
         out = np.empty_like(values)
-        self.comm.Allreduce(values, out, op=self.MPI.SUM)
+        self.mpi_comm.Allreduce(values, out, op=MPI.SUM)
         return out
 
     def max(self, values: np.ndarray) -> np.ndarray:
+        """Elementwise maximum over the ranks."""
         out = np.empty_like(values)
-        self.comm.Allreduce(values, out, op=self.MPI.MAX)
+        self.mpi_comm.Allreduce(values, out, op=MPI.MAX)
         return out
+
+    def gather_objects(self, obj) -> list:
+        """Every rank's Python object, in rank order, on every rank."""
+        return self.mpi_comm.allgather(obj)
 
     def abort(self, code: int = 1):
         sys.stderr.flush()
         sys.stdout.flush()
-        self.comm.Abort(code)
+        self.mpi_comm.Abort(code)
 
 
 def partition_on_root(comm: Comm, xadj, adjncy, seed: int = 0) -> np.ndarray:
     """METIS on rank 0 (it is serial), the partition vector broadcast to all."""
-    from .partition import partition_vertices
-    part = None
+    n = xadj.shape[0] - 1
     if comm.rank == 0:
         part = partition_vertices(xadj, adjncy, comm.size, seed=seed).astype(np.int32)
-    n = xadj.shape[0] - 1
-    if comm.rank != 0:
+    else:
         part = np.empty(n, dtype=np.int32)
-    comm.comm.Bcast(part, root=0)
+    comm.mpi_comm.Bcast(part, root=0)
     return part

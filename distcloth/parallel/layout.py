@@ -1,4 +1,4 @@
-"""Per-rank view of the partitioned cloth (seed 000 Part 1 §5.4-5.5).
+"""Per-rank view of the partitioned cloth (EG07 tutorial, Part 1 §5.4-5.5).
 
 Owned vertices are numbered internal first, then interface (adjacent through
 the matrix graph to a vertex of another rank); ghosts (non-owned vertices that

@@ -1,4 +1,5 @@
-"""Thin ctypes binding to METIS 5 k-way graph partitioning (seed 000 Part 1 §5.4).
+"""Thin ctypes binding to METIS 5 k-way graph partitioning (EG07 tutorial, Part 1 §5.4;
+Karypis and Kumar 1998).
 
 Only ``METIS_PartGraphKway`` is bound.  Debian's libmetis is built with
 IDXTYPEWIDTH 32 and REALTYPEWIDTH 32 (/usr/include/metis.h), so idx_t is int32.

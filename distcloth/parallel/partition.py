@@ -1,5 +1,5 @@
 """Vertex partition of the cloth and the per-rank layout built from it
-(seed 000 Part 1 §5.4-5.5).
+(EG07 tutorial, Part 1 §5.4-5.5).
 
 ``partition_vertices`` splits the matrix graph with METIS k-way (§5.4).
 ``build_layout`` turns the partition vector into one rank's

@@ -1,7 +1,7 @@
 """Distributed task pools with receiver-initiated round-robin work stealing
 for the BVH traversal of a collision phase.
 
-Seed 000 (000_f60be85aa292bde2.txt) Part 1 §5.8.1-5.8.2.  The hierarchies
+EG07 tutorial, Part 1 §5.8.1-5.8.2.  The hierarchies
 are replicated on every rank, so a test is four integers (obj1, node1, obj2,
 node2) and a *task* is a small int64 array of tests
 (distcloth/collision/traverse.py).  Every rank keeps
@@ -32,7 +32,7 @@ and at least one chunk of them runs before the thief polls again, so a task
 never bounces between ranks without progress.
 
 Messages go over a communicator duplicated once per parent communicator
-(``comm.comm.Dup()``, collective on the first stealing call), never mixing
+(``comm.mpi_comm.Dup()``, collective on the first stealing call), never mixing
 with other traffic.  Each call is an *epoch*; the tag of a message is
 ``kind + 16 * (epoch mod 2048)`` and its first payload word is the epoch;
 receiving a message of another epoch raises (it cannot happen: every
@@ -111,6 +111,7 @@ import time
 from collections import deque
 
 import numpy as np
+from mpi4py import MPI
 
 from ..collision.traverse import TraversalState, as_forest
 
@@ -146,8 +147,7 @@ def _channel(mpi_comm) -> _Channel:
 
 def _mpi_of(comm):
     """(mpi4py communicator, MPI module) of a distcloth Comm or an mpi4py Comm."""
-    from mpi4py import MPI
-    return getattr(comm, "comm", comm), MPI
+    return getattr(comm, "mpi_comm", comm), MPI
 
 
 def run_tasks(comm, forest, tests, owner, *, stealing: bool = True, a: float = 2.0, b: float = 8,
@@ -161,8 +161,8 @@ def run_tasks(comm, forest, tests, owner, *, stealing: bool = True, a: float = 2
     owner and parameters); with ``stealing=False`` every rank just runs its
     own tests (static assignment, no communication).
 
-    a, b: task creation threshold tau = a * sigma + b (seed 000: a = 2,
-    b = 8); chunk: tests per traversal chunk between two polls; delay: test
+    a, b: task creation threshold tau = a * sigma + b (EG07 tutorial,
+    Part 1 §5.8.2: a = 2, b = 8); chunk: tests per traversal chunk between two polls; delay: test
     mode, sleep uniform(0, delay) seconds with probability delay_prob before
     each chunk, each steal request and each answer (random, seeded by seed,
     rank and epoch); timeout: raise StealTimeout after that many seconds.

@@ -1,16 +1,16 @@
 """Bending on hinge stencils: isometric quadratic bending and dihedral-angle bending.
 
-Seed 000 Part 1 §4.3 (Fig. 11 b, c) surveys the bending models for triangle
+The EG07 tutorial, Part 1 §4.3 (Fig. 11 b, c), surveys the bending models for triangle
 meshes whose basic element is a *hinge*: two triangles sharing an edge.  Two
 of them are implemented here:
 
-* the isometric quadratic model of Bergou et al. [BWH*06] (the same family as
-  the linear bending of Volino et al. [VMT06b], Fig. 11 c): the energy is a
-  fixed quadratic form of the positions, forces are linear and the Jacobian
-  is constant;
-* the dihedral-angle model of Bridson et al. [BMF03] (Fig. 11 b), with the
-  energy quadratic in the angle as in discrete shells (Grinspun et al. 2003,
-  [GH*03] in §4.3; also Baraff and Witkin [BW98]).
+* the isometric quadratic model of Bergou et al. 2006 (the same family as
+  the linear bending of Volino and Magnenat-Thalmann 2006, Fig. 11 c): the
+  energy is a fixed quadratic form of the positions, forces are linear and
+  the Jacobian is constant;
+* the dihedral-angle model of Bridson et al. 2003 (Fig. 11 b), with the
+  energy quadratic in the angle as in discrete shells (Grinspun et al. 2003;
+  also Baraff and Witkin 1998).
 
 Hinge layout
 ------------
@@ -120,7 +120,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .terms import ForceTerm
+from .base import ForceTerm
 
 C_HINGE = 0.5
 """Per-hinge energy constant (see module docstring): cylinder-calibrated."""
@@ -551,7 +551,7 @@ class _HingeTerm(ForceTerm):
 
 
 class IsometricBendingTerm(_HingeTerm):
-    """Isometric quadratic bending (Bergou et al. 2006; seed 000 Part 1 §4.3).
+    """Isometric quadratic bending (Bergou et al. 2006; EG07 tutorial, Part 1 §4.3).
 
     E = 1/2 x^T Q x,  Q = sum_h (2 C_HINGE B_h / (Abar_A + Abar_B)) k_h k_h^T (x) I3,
     constant and exact Jacobian df/dx = -Q.  Assumes a flat rest shape (see
@@ -580,7 +580,7 @@ class IsometricBendingTerm(_HingeTerm):
 
 
 class DihedralBendingTerm(_HingeTerm):
-    """Dihedral-angle bending (Bridson et al. 2003; seed 000 Part 1 §4.3, Fig. 11 b).
+    """Dihedral-angle bending (Bridson et al. 2003; EG07 tutorial, Part 1 §4.3, Fig. 11 b).
 
     E = sum_h kb_h (theta_h - theta0_h)^2,  kb = C_HINGE B |ebar|^2 / (Abar_A + Abar_B),
     theta0 the rest angles (from ``rest`` unless ``rest_angle`` is given).

@@ -2,14 +2,15 @@
 
 Why not the per-hinge sums of ``bending.py``
 ---------------------------------------------
-The hinge models of seed 000 Part 1 §4.3 (dihedral angle [BMF03], isometric
-[BWH*06]) add one independent term per hinge, sum_h c_h theta_h^2.  On a
-mesh whose hinges run in a few directions that sum is the quadratic form
-sum_d c_d (n_d^T K n_d)^2 of the curvature tensor K, which is not the
-isotropic plate energy: on the split-square grid it has no twist stiffness
-along the grid axes, so a bent strip relieves its diagonal hinges by
-twisting at the mesh scale and comes out 15-17 % too compliant at every
-resolution (tests/test_elastica.py; docs/mesh_independence.md).
+The hinge models of the EG07 tutorial, Part 1 §4.3 (dihedral angle, Bridson
+et al. 2003; isometric, Bergou et al. 2006) add one independent term per
+hinge, sum_h c_h theta_h^2. On a mesh whose hinges run in a few directions
+that sum is the quadratic form sum_d c_d (n_d^T K n_d)^2 of the curvature
+tensor K, which is not the isotropic plate energy: on the split-square grid
+it has no twist stiffness along the grid axes, so a bent strip relieves its
+diagonal hinges by twisting at the mesh scale and comes out 15-17 % too
+compliant at every resolution (tests/test_elastica.py;
+docs/mesh_independence.md).
 
 What is done here (a rotation-free shell triangle: Onate and Zarate 2000,
 "basic shell triangle"; Grinspun et al. 2006, "Computing discrete shape
@@ -72,9 +73,10 @@ The two models
   the Gauss-Newton Hessian sum_ij Q_ij grad theta_i grad theta_j^T
   (positive semi-definite since Q is); the dropped part sum_i (Q theta)_i
   Hess theta_i vanishes at rest.
-* isometric (quadratic, constant Hessian; Bergou et al. 2006, Volino's linear
-  bending, seed 000 §4.3 Fig. 11c): theta_i is replaced by the vector jump
-  J_i = sum_a w_a x_a (for a flat hinge bent by theta, J = theta n + O(theta^2)),
+* isometric (quadratic, constant Hessian; Bergou et al. 2006, the linear
+  bending of Volino and Magnenat-Thalmann 2006, EG07 tutorial, Part 1 §4.3,
+  Fig. 11c): theta_i is replaced by the vector jump J_i = sum_a w_a x_a (for a flat hinge bent by theta,
+  J = theta n + O(theta^2)),
   E_T = 1/2 sum_ij Q_ij J_i . J_j.  The energy is a fixed quadratic form of
   the positions, rotation invariant, zero for every affine map of a flat
   rest shape (linear precision of w), Jacobian constant and exact.  Like
@@ -92,7 +94,7 @@ import numpy as np
 from numba import njit
 
 from .bending import hinge_angle_gradient, hinge_angles
-from .terms import ForceTerm
+from .base import ForceTerm
 
 SQRT2 = np.sqrt(2.0)
 # stencil positions of hinge i of a triangle: edge (i+1, i+2), own vertex i, opposite 3+i

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .terms import ForceTerm
+from .base import ForceTerm
 
 # m/s: the creep speed of a stuck contact (a 0.1 mm drift over a second);
 # the tangential diagonal then grows by mu g h / V_STICK (about 250 at
@@ -74,12 +74,11 @@ class ContactFrictionTerm(ForceTerm):
     def evaluate(self, x, v, force, want_jac):
         idx = self.index
         if idx.size == 0:
-            return {}
+            return
         if self.c is None:       # the step's first evaluation: force holds every other term
             self.c = self._coefficients(v[idx] - self.u, force[idx], self.mass[idx])
         vt = np.einsum("nij,nj->ni", self.P, v[idx] - self.u)
         np.subtract.at(force, idx, self.c[:, None] * vt)
-        return {}
 
     def _coefficients(self, vrel, f_other, m):
         n, h, mu = self.normal, self.h, self.mu

@@ -1,17 +1,17 @@
-"""Continuum membrane: linear triangles in plane stress (seed 000 Part 1 §3.2-3.6).
+"""Continuum membrane: linear triangles in plane stress (EG07 tutorial, Part 1 §3.2-3.6).
 
 Each triangle gets, once, a 2D rest frame in its plane whose first axis is
 the fabric's weft direction (u) and second the warp (v = n x u), the inverse
 Dm^-1 of its 2x2 rest edge matrix and its rest area A (§3.6: linear element,
 constant strain).  With Ds = [x1 - x0, x2 - x0] (3x2) the deformation gradient
-(seed Eq. 3) is F = Ds Dm^-1 (3x2), i.e. F = sum_i x_i g_i^T with
+(EG07 tutorial, Part 1 Eq. 3) is F = Ds Dm^-1 (3x2), i.e. F = sum_i x_i g_i^T with
 g_1, g_2 the rows of Dm^-1 and g_0 = -g_1 - g_2 (``G`` below, (ne, 3, 2)).
 
 Strain measures (Voigt, engineering shear: e = [e_uu, e_vv, 2 e_uv]):
 
-* ``stvk``: Green strain E = 1/2 (F^T F - I) (seed Eq. 6), energy
+* ``stvk``: Green strain E = 1/2 (F^T F - I) (Part 1 Eq. 6), energy
   W = 1/2 A e^T C e (St. Venant-Kirchhoff).
-* ``corotated``: polar decomposition F = R S (seed Eq. 9), R (3x2) with
+* ``corotated``: polar decomposition F = R S (Part 1 Eq. 9), R (3x2) with
   orthonormal columns, S = sqrt(F^T F) (2x2 SPD, right stretch).  The
   corotated Cauchy strain of Eq. 11, eps_C(R^T phi), is sym(R^T F) - I =
   S - I (the Biot strain); energy W = 1/2 A eps^T C eps.  The rotation is
@@ -26,7 +26,7 @@ written in terms of the Green strain e: Sigma = dW/de (3,), D = d2W/de2 (3x3),
 and (per unit area) d2W/dF2 = B^T D B + Sigma_mat (x) I3 with B = de/dF
 (3x6) and Sigma_mat = [[S0, S2], [S2, S1]].
 
-Material (seed §3.5, Eq. 22): orthotropic plane stress in the weft/warp frame
+Material (EG07 tutorial, Part 1 §3.5, Eq. 22): orthotropic plane stress in the weft/warp frame
 
     C = 1/(1 - nu_u nu_v) [[E_u, nu_u E_v, 0], [nu_v E_u, E_v, 0],
                            [0, 0, G (1 - nu_u nu_v)]]
@@ -61,7 +61,7 @@ all 6x6 Hr (1.23 s on the 9x9 H) on top of the kernel, so in-kernel
 projection with the pre-tests is kept.  add_to_system 22 ms,
 stiffness_product 7 ms.
 
-Nonlinear tension (seed 000 Part 2 §1.1, §1.3: weft and warp kept
+Nonlinear tension (EG07 tutorial, Part 2 §1.1, §1.3: weft and warp kept
 independent, each linear parameter replaced by a measured strain-stress
 curve, stiffening with strain): ``stvk`` with tables.  The weft and warp
 direct stresses are piecewise-linear functions S_d(e_d) of their Green
@@ -78,7 +78,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .terms import ForceTerm
+from .base import ForceTerm
 
 STVK = 0
 COROTATED = 1
@@ -114,7 +114,7 @@ Q0 = np.array([[1.0 / np.sqrt(2.0), 1.0 / np.sqrt(6.0)],
 # ----------------------------------------------------------------- material
 
 def orthotropic_plane_stress(E_weft, E_warp, nu_weft, nu_warp, G):
-    """3x3 Voigt (engineering shear) plane-stress stiffness, seed 000 §3.5 Eq. 22.
+    """3x3 Voigt (engineering shear) plane-stress stiffness, EG07 tutorial, Part 1 §3.5 Eq. 22.
 
     Raises ValueError unless nu_weft E_warp == nu_warp E_weft (rel. 1e-9,
     the symmetry of C) and nu_weft nu_warp < 1."""

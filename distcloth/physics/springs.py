@@ -1,4 +1,4 @@
-"""Mass-spring forces with exact Jacobians (seed 002 §2.2, Eq. 2).
+"""Mass-spring forces with exact Jacobians (Vassilev et al. 2001 §2.2, Eq. 2).
 
 Spring s joins local vertices i, j with rest length l0, stiffness k and
 damping c.  With d = x_i - x_j, l = |d|, u = d / l:

@@ -1,23 +1,7 @@
-"""Force terms: one object per effect, each a stage of the step.
-
-A term sees local arrays (owned vertices first, then ghosts) and never a
-communicator.  Its contract:
-
-* ``stencils()``: element vertex lists whose blocks it writes, fixed for the
-  run, from which the matrix sparsity is built once;
-* ``bind(pattern)``: remember where its blocks go in the value array;
-* ``evaluate(x, v, force, want_jac)``: add its forces to ``force`` and keep
-  what the Jacobian needs; returns {"elastic_energy": .., "max_strain": ..}
-  contributions (energies already weighted so ranks sum to the total);
-* ``stiffness_product(w, out)``: out += (df/dx) w at the last evaluation;
-* ``add_to_system(data, alpha, beta)``: add its part of
-  A = M - beta df/dv - alpha df/dx to the block values;
-* ``energy(x)``: its potential energy only (diagnostics; 0 for dissipative
-  terms);
-* ``max_strain(x)``: its largest engineering strain (stretch - 1) at x, 0 for
-  terms that do not stretch the membrane (diagnostics and ``time.max_strain``).
-
-Adding an effect means adding a term here and naming it in ``build_terms``.
+"""The force terms of the step, one per effect, and how each is built for a
+rank's local arrays.  The contract a term keeps is in ``physics/base.py``;
+the order of the terms and which effect turns each on is declared in
+``distcloth/stages.py``.
 """
 from __future__ import annotations
 
@@ -25,32 +9,10 @@ import numpy as np
 
 from ..model import FLEXION, SHEAR, STRUCTURAL
 from . import springs as sk
-
-
-class ForceTerm:
-    name = "force"
-    has_jacobian = True
-
-    def stencils(self):
-        return []
-
-    def bind(self, pattern):
-        pass
-
-    def evaluate(self, x, v, force, want_jac):
-        return {}
-
-    def stiffness_product(self, w, out):
-        pass
-
-    def add_to_system(self, data, alpha, beta):
-        pass
-
-    def energy(self, x):
-        return 0.0
-
-    def max_strain(self, x):
-        return 0.0
+from .base import ForceTerm, local_elements
+from .bending import DihedralBendingTerm, IsometricBendingTerm
+from .bending_shell import JUMP_GAMMA, ShellDihedralBendingTerm, ShellIsometricBendingTerm
+from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress
 
 
 class _SpringSet(ForceTerm):
@@ -84,10 +46,8 @@ class SpringTerm(_SpringSet):
         self.clamp = clamp
 
     def evaluate(self, x, v, force, want_jac):
-        energy, strain = sk.spring_forces(x, v, self.springs, self.rest, self.k, self._zero,
-                                          self.weight, self.clamp, want_jac, force,
-                                          self.hess, self.unit, self.strain_mask)
-        return {"elastic_energy": energy, "max_strain": strain}
+        sk.spring_forces(x, v, self.springs, self.rest, self.k, self._zero, self.weight,
+                         self.clamp, want_jac, force, self.hess, self.unit, self.strain_mask)
 
     def stiffness_product(self, w, out):
         sk.spring_stiffness_product(self.springs, self.hess, w, out)
@@ -119,7 +79,6 @@ class SpringDampingTerm(_SpringSet):
         # zero stiffness: only the damping part of the spring force remains
         sk.spring_forces(x, v, self.springs, self.rest, self._zero, self.c, self._zero,
                          True, want_jac, force, self.hess, self.unit, self._mask)
-        return {}
 
     def add_to_system(self, data, alpha, beta):
         sk.add_spring_blocks(self.hess, self.unit, self.c, 0.0, beta, self.slots, data)
@@ -135,7 +94,6 @@ class GravityTerm(ForceTerm):
 
     def evaluate(self, x, v, force, want_jac):
         force += self.mg
-        return {}
 
     def energy(self, x):
         return -float(np.sum(self.weight * np.einsum("ij,ij->i", self.mg, x)))
@@ -155,7 +113,6 @@ class DragTerm(ForceTerm):
 
     def evaluate(self, x, v, force, want_jac):
         force -= self.coef[:, None] * v
-        return {}
 
     def add_to_system(self, data, alpha, beta):
         d = beta * self.coef[: self.n_owned]
@@ -164,85 +121,81 @@ class DragTerm(ForceTerm):
         data[self.diag_slots, 2, 2] += d
 
 
-def build_terms(cfg, model, layout):
-    """The force terms a scene asks for, on this rank's local arrays, in stage order."""
-    local = layout.local_input
+class LocalSprings:
+    """The model's springs with at least one owned end, on local numbering,
+    and the energy weight of each (a spring counts once globally: each owned
+    end carries half of it)."""
+
+    def __init__(self, model, layout):
+        self.ids = layout.local_spring_ids
+        self.ends = layout.local_springs
+        self.weight = 0.5 * ((self.ends[:, 0] < layout.n_owned).astype(float)
+                             + (self.ends[:, 1] < layout.n_owned).astype(float))
+        self.kind = model.spring_kind[self.ids]
+        self.rest = model.spring_rest_length[self.ids]
+        self.stiffness = model.spring_stiffness[self.ids]
+        self.damping = model.spring_damping[self.ids]
+
+    def term(self, name, kinds) -> SpringTerm:
+        sel = np.isin(self.kind, kinds)
+        return SpringTerm(name, self.ends[sel], self.rest[sel], self.stiffness[sel],
+                          self.weight[sel], self.kind[sel] == STRUCTURAL)
+
+
+# --- one builder per force stage: (cfg, model, layout) -> the term ----------------
+# (each called only when its effect is on; the material law is one per scene,
+# which scene.build checks)
+
+def build_gravity(cfg, model, layout) -> ForceTerm:
     own = np.zeros(layout.n_local)
     own[: layout.n_owned] = 1.0
-    ids = layout.local_spring_ids
-    lsp = layout.local_springs
-    # a spring counts once globally: each owned end carries half of it
-    spring_weight = 0.5 * ((lsp[:, 0] < layout.n_owned).astype(float)
-                           + (lsp[:, 1] < layout.n_owned).astype(float))
-    kind = model.spring_kind[ids]
-    terms = []
-    if cfg.has("gravity"):
-        terms.append(GravityTerm(model.vertex_mass[local], cfg.gravity, own))
-
-    def spring_term(name, kinds):
-        sel = np.isin(kind, kinds)
-        return SpringTerm(name, lsp[sel], model.spring_rest_length[ids][sel],
-                          model.spring_stiffness[ids][sel], spring_weight[sel],
-                          kind[sel] == STRUCTURAL)
-
-    material = cfg.cloth[0].material        # one law per scene (scene.build checks it)
-    if cfg.has("membrane"):
-        if material.model == "fem":
-            terms.append(_fem_membrane(cfg, model, layout, material))
-        else:
-            terms.append(spring_term("force:membrane", [STRUCTURAL, SHEAR]))
-    if cfg.has("bending"):
-        if material.bending_kind == "flexion":
-            terms.append(spring_term("force:bending", [FLEXION]))
-        else:
-            terms.append(_hinge_bending(cfg, model, layout, material.bending_kind))
-    if cfg.has("damping"):
-        sel = model.spring_damping[ids] > 0.0
-        terms.append(SpringDampingTerm(lsp[sel], model.spring_rest_length[ids][sel],
-                                       model.spring_damping[ids][sel]))
-    if cfg.has("drag") and cfg.drag > 0.0:
-        terms.append(DragTerm(model.vertex_area[local], cfg.drag, layout.n_owned))
-    return terms
+    return GravityTerm(model.vertex_mass[layout.local_input], cfg.gravity, own)
 
 
-# friction last: its coefficients are set from every other force at the start state
-FORCE_STAGES = ("force:gravity", "force:membrane", "force:bending", "force:damping", "force:drag",
-                "force:friction")
+def build_membrane(cfg, model, layout) -> ForceTerm:
+    material = cfg.cloth[0].material
+    if material.model == "fem":
+        return _fem_membrane(model, layout, material)
+    return LocalSprings(model, layout).term("force:membrane", [STRUCTURAL, SHEAR])
 
 
-def local_elements(elements: np.ndarray, layout):
-    """Elements with at least one owned vertex, in local numbering, and the
-    fraction of their vertices this rank owns (their energy weight)."""
-    to_local = np.full(layout.part.shape[0], -1, dtype=np.int64)
-    to_local[layout.local_input] = np.arange(layout.n_local)
-    el = to_local[elements]
-    owned = (el >= 0) & (el < layout.n_owned)
-    keep = owned.any(axis=1)
-    if np.any(el[keep] < 0):      # the ghost layer covers every matrix-graph neighbour
-        raise RuntimeError("an element with an owned vertex reaches beyond the ghost layer")
-    return el[keep], owned[keep].sum(axis=1) / elements.shape[1], np.nonzero(keep)[0]
+def build_bending(cfg, model, layout) -> ForceTerm:
+    kind = cfg.cloth[0].material.bending_kind
+    if kind == "flexion":
+        return LocalSprings(model, layout).term("force:bending", [FLEXION])
+    return _hinge_bending(cfg, model, layout, kind)
 
 
-def _fem_membrane(cfg, model, layout, material):
-    from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress
+def build_damping(cfg, model, layout) -> ForceTerm:
+    springs = LocalSprings(model, layout)
+    sel = springs.damping > 0.0
+    return SpringDampingTerm(springs.ends[sel], springs.rest[sel], springs.damping[sel])
+
+
+def build_drag(cfg, model, layout) -> ForceTerm | None:
+    if cfg.drag <= 0.0:
+        return None
+    return DragTerm(model.vertex_area[layout.local_input], cfg.drag, layout.n_owned)
+
+
+def _fem_membrane(model, layout, material):
     tris, weight, _ = local_elements(model.triangles, layout)
     C = orthotropic_plane_stress(*material.orthotropic())
     weft = np.broadcast_to(np.asarray(material.weft, float), (tris.shape[0], 3))
     rest = model.rest_positions[layout.local_input]
     tables = None
     if any(t is not None for t in (material.tension_weft, material.tension_warp, material.shear_curve)):
-        # a missing curve keeps the linear law of Eq. 22 (its C11 / C22 / C33 slope)
-        lin = lambda c: ((0.0, 0.0), (1.0, c))   # noqa: E731
-        tables = (material.tension_weft or lin(C[0, 0]), material.tension_warp or lin(C[1, 1]),
-                  material.shear_curve or lin(C[2, 2]))
+        # a missing curve keeps the linear law of EG07 tutorial Eq. 22 (its C11 / C22 / C33 slope)
+        def linear(c):
+            return ((0.0, 0.0), (1.0, c))
+        tables = (material.tension_weft or linear(C[0, 0]), material.tension_warp or linear(C[1, 1]),
+                  material.shear_curve or linear(C[2, 2]))
     return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables)
 
 
 def _hinge_bending(cfg, model, layout, kind):
     """Per-hinge sums of bending.py for ``dihedral``/``isometric``; the
     per-triangle curvature of bending_shell.py for ``*_shell``."""
-    from .bending import DihedralBendingTerm, IsometricBendingTerm
-    from .bending_shell import JUMP_GAMMA, ShellDihedralBendingTerm, ShellIsometricBendingTerm
     shell = kind in ("dihedral_shell", "isometric_shell")
     elements = model.shell_stencil if shell else model.hinge_vertices
     local, weight, ids = local_elements(elements, layout)

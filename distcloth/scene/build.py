@@ -8,6 +8,8 @@ import numpy as np
 
 from ..config.schema import ClothSpec, ConfigError, SceneConfig
 from ..model import FLEXION, SHEAR, STRUCTURAL, Model, PieceInfo
+from ..physics.bending import hinges
+from ..physics.bending_shell import shell_jump_stencils, shell_stencils
 from . import grid as gridlib
 from .meshio import MeshFormatError, read_mesh
 from .pins import select_pin_axes, select_pins
@@ -94,10 +96,8 @@ def build_model(cfg: SceneConfig) -> Model:
     kinds = {spec.material.bending_kind for spec in cfg.cloth}
     try:
         if kinds & {"dihedral", "isometric"}:
-            from ..physics.bending import hinges
             hinge_vertices = hinges(triangles)
         if kinds & {"dihedral_shell", "isometric_shell"}:
-            from ..physics.bending_shell import shell_jump_stencils, shell_stencils
             shell_stencil, shell_present = shell_stencils(triangles)
             shell_jump = shell_jump_stencils(shell_stencil, shell_present)
     except ValueError as exc:

@@ -2,7 +2,7 @@
 
 Vertex (i, j) (i along u = local x, j along v = local y) has index
 ``j * nu + i``; local coordinates are centred at the origin in the z = 0
-plane.  Spring families follow seed 002 §2.2: structural springs join grid
+plane.  Spring families follow Vassilev et al. 2001 §2.2: structural springs join grid
 neighbours, shear springs both diagonals of every quad, flexion springs
 vertices two apart along rows and columns.
 """

@@ -1,5 +1,5 @@
 """Spring constants from the material (docs/config.md "Material mapping",
-seed 002 §2.2) and spring topology of general triangle meshes.
+Vassilev et al. 2001 §2.2) and spring topology of general triangle meshes.
 """
 from __future__ import annotations
 

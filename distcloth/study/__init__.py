@@ -2,14 +2,16 @@
 
 Each study is a module with ``add_arguments(parser)`` and
 ``main(args, comm) -> exit status``; registering it here adds the
-subcommand (a later ``study accuracy`` goes beside ``stability``).
+subcommand.
 """
 from __future__ import annotations
 
 import importlib
 
 STUDIES = {
-    "stability": ("the stability suite (issue 6): cases x integrators, a table of "
+    "accuracy": ("the accuracy study: sweep settings, errors against a finer reference, "
+                 "wall time and stage split, CSV + Markdown + plots", "distcloth.study.accuracy"),
+    "stability": ("the stability suite: cases x integrators, a table of "
                   "survived / stopped / refused / FAILED", "distcloth.study.stability"),
 }
 

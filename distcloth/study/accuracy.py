@@ -1,5 +1,5 @@
 """``distcloth study accuracy SCENE.yaml --vary key=v1,v2 ...``: which settings
-buy how much accuracy for how much time (issue 6, item 1).
+buy how much accuracy for how much time.
 
 Variants run collectively (distcloth/study/sweep.py), their errors against a
 finer reference are measured on rank 0 (distcloth/study/metrics.py), and the
@@ -19,11 +19,13 @@ import sys
 
 import numpy as np
 
+from ..config.load import apply_overrides, read_scene_file
+from ..io.h5read import read_result
+from ..linalg.petsc import init_petsc
+from ..parallel.comm import Comm
+from . import accuracy_report as rep
 from . import sweep
 from .metrics import compare, nanmax, reference_drape, support_disc_area
-
-HELP = ("the accuracy study (issue 6): sweep settings, errors against a finer reference, "
-        "wall time and stage split, CSV + Markdown + plots")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -61,7 +63,6 @@ def say_on(comm):
 
 
 def load_scene(path: str) -> dict:
-    from ..config.load import read_scene_file
     return read_scene_file(path)
 
 
@@ -93,7 +94,6 @@ def analyse(outcomes, *, divergence=0.01, support_area=0.0):
     """Rows (variants, then the reference and noise rerun) with their metrics
     against the reference; rank 0 only (reads the files serially).  The
     reference's row carries its own drape measures over time (``times``, ``drape``)."""
-    from ..io.h5read import read_result
     ref_o = next(o for o in outcomes if o.variant.role == "reference")
     if ref_o.status != "completed":
         raise RuntimeError(f"the reference did not complete ({ref_o.status}: {ref_o.message})")
@@ -127,9 +127,7 @@ def main(args, comm=None) -> int:
         add_arguments(p)
         args = p.parse_args(list(args))
     if comm is None:
-        from ..linalg.petsc import init_petsc
         init_petsc([])
-        from ..parallel.comm import Comm
         comm = Comm()
     say = say_on(comm)
     try:
@@ -156,11 +154,10 @@ def main(args, comm=None) -> int:
     if comm.rank == 0:
         code = write_outputs(outcomes, {**axes, **alone}, directory, scene, args, comm.size, say,
                              support_area=support_disc_area(_base_scene(raw, args.overrides)))
-    return int(comm.bcast(code))
+    return int(comm.broadcast(code))
 
 
 def _base_scene(raw: dict, overrides) -> dict:
-    from ..config.load import apply_overrides
     return apply_overrides(sweep.normalise_scene(raw), tuple(overrides))
 
 
@@ -173,7 +170,6 @@ def _command(args, ranks: int) -> str:
 
 
 def write_outputs(outcomes, axes, directory, scene, args, ranks, say, *, support_area=0.0) -> int:
-    from . import accuracy_report as rep
     try:
         rows, noise = analyse(outcomes, divergence=args.divergence, support_area=support_area)
     except RuntimeError as exc:

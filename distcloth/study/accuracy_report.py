@@ -423,9 +423,10 @@ def _plot_drape(plt, path, rows, chaos) -> None:
 
 def plot(prefix: str, rows, noise, stages, *, error="rms_mean", chaos=None) -> list[str]:
     """error_vs_wall.png, error_vs_time.png, stage_split.png, drape.png beside ``prefix``."""
+    # matplotlib takes a second to import: only the plotting pays for it
     import matplotlib
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
     var = [r for r in rows if r["role"] == "variant" and r["status"] == "completed"
            and math.isfinite(r.get(error, math.nan))]
     paths = [prefix + n for n in ("error_vs_wall.png", "error_vs_time.png", "stage_split.png")]

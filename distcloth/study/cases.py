@@ -1,4 +1,4 @@
-"""The stability cases (issue 6): each a raw scene mapping, as
+"""The stability cases: each a raw scene mapping, as
 ``config_from_dict`` takes it, an optional hook on the built model's start
 state, and the criteria its verdict uses.  ``reduced=True`` gives the CI
 size: coarser meshes, fewer steps, the same physics.
@@ -69,8 +69,8 @@ def _large_step(h):
         return sheet(reduced, step=h, end=1.0 if reduced else 3.0)
     return Case(
         f"large_step_{h:g}", f"large step h = {h:g} s",
-        f"The hanging sheet falls from flat and swings at h = {h:g} s (the issue asks up to "
-        "0.1 s): its free edge drops about 0.5 m, 0.32 s in free fall, so at 0.1 s a scheme "
+        f"The hanging sheet falls from flat and swings at h = {h:g} s (the suite goes up "
+        "to 0.1 s): its free edge drops about 0.5 m, 0.32 s in free fall, so at 0.1 s a scheme "
         "sees the fall in about three steps. " + BOUND, scene)
 
 
@@ -208,8 +208,9 @@ CASES = [
          "centre stops on the sphere, the edges wrap round it and hit the floor. Contacts are "
          "inelastic, so E must fall: bound 0.1 S, S dominated by the start's kinetic energy. "
          "Penetration: no free vertex deeper than 0.1 d inside the sphere's or the floor's "
-         "offset at the end of a step (issue 4's tolerance). Where the sphere meets the floor "
-         "the gap is narrower than 2 d: a vertex driven in there cannot satisfy both.",
+         "offset at the end of a step (the bound of the bundled scenes, docs/collisions.md). "
+         "Where the sphere meets the floor the gap is narrower than 2 d: a vertex driven in "
+         "there cannot satisfy both.",
          _impact_scene, _impact_hook),
     Case("pinch", "pinched between two colliders",
          "A 0.3 m sheet hangs from its top edge; two spheres (r = 8 cm, friction 0.5) close in "

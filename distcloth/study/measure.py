@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..collision.colliders import AnalyticCollider, Box, Capsule, Plane, RigidMotion, Sphere
+
 
 class PenetrationOracle:
     """Signed distances to the scene's analytic colliders (mesh colliders are
     not used by the stability cases)."""
 
     def __init__(self, cfg):
-        from ..collision.colliders import AnalyticCollider, Box, Capsule, Plane, RigidMotion, Sphere
         shapes = {"plane": Plane, "sphere": Sphere, "capsule": Capsule, "box": Box}
         self.bodies = []
         if not cfg.has("collisions"):
@@ -45,11 +46,11 @@ class PenetrationOracle:
         free = np.ones(n, dtype=bool)
         for held in (sim.pinned_local, sim.slide_local):
             free[held[held < n]] = False
-        x = sim.x[:n][free]
+        x = sim.state.x[:n][free]
         worst = -np.inf
         for body, d in self.bodies:
             if x.shape[0]:
-                phi = body.query(x, sim.time)[0]
+                phi = body.query(x, sim.state.t)[0]
                 # NaN positions give NaN depths: count them as infinitely deep
                 depth = np.where(np.isfinite(phi), (d - phi) / d, np.inf)
                 worst = max(worst, float(depth.max()))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 # frames whose times differ by less than this (relative to the time scale) are
 # the same output time; steps are rounded from every/h, so only round-off separates them
@@ -44,7 +45,6 @@ class RestInterpolator:
     its barycentric coordinates there."""
 
     def __init__(self, rest: np.ndarray, triangles: np.ndarray, candidates: int = 12):
-        from scipy.spatial import cKDTree
         self.rest = np.asarray(rest, float)
         self.tri = np.asarray(triangles, np.int64)
         self.centroids = self.rest[self.tri].mean(axis=1)

@@ -10,14 +10,24 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import shlex
 import sys
 import time
 from dataclasses import dataclass, field
 from typing import Callable
 
+from ..config import format_config_error
+from ..config.load import config_from_dict
+from ..config.schema import ConfigError
+from ..energy_guard import gravity_scale
+from ..scene import build_model
+from ..simulation import Simulation, SimulationError
 from .cases import CASE_NAMES, CASES, get_case, steps_of
 from .classify import REFUSED, Trace, classify
+from .measure import PenetrationOracle
+from .outcome import MAX_EXPLICIT_STEPS, MAX_EXPLICIT_STEPS_REDUCED, Result
+from .report import markdown, write_csv
 
 IMPLICIT = ("backward_euler", "bdf2", "implicit_midpoint", "newmark")
 EXPLICIT = ("explicit_midpoint", "rk4", "symplectic_euler")
@@ -47,37 +57,12 @@ SETTINGS = {
                                EXPLICIT, explicit_fraction=0.5),
     "explicit_forced": Setting("explicit_forced", "explicit at the case's step, forced past the "
                                "start-up refusal (distcloth run --force)", EXPLICIT, force=True),
-    "mass_spring": Setting("mass_spring", "mass-spring membrane (seed 002) and flexion-spring "
-                           "bending instead of FE and hinges, the case's step, one Newton step "
+    "mass_spring": Setting("mass_spring", "mass-spring membrane (Vassilev et al. 2001) and "
+                           "flexion-spring bending instead of FE and hinges, the case's step, one Newton step "
                            "(not run on the long run)", INTEGRATORS,
                            material={"model": "mass_spring"}, skip_cases=("long_run",)),
 }
 DEFAULT_SETTINGS = ("case_step", "explicit_stable")
-# explicit runs at their stable step: the case's duration, at most this many steps
-MAX_EXPLICIT_STEPS, MAX_EXPLICIT_STEPS_REDUCED = 2_000, 200
-
-
-@dataclass
-class Result:
-    case: str
-    integrator: str
-    setting: str
-    status: str
-    step: int | None = None
-    reason: str = ""
-    h: float = math.nan
-    steps_planned: int = 0
-    steps_run: int = 0
-    sim_time: float = 0.0
-    wall: float = 0.0
-    energy_excess: float = math.nan
-    slope_rise: float = math.nan
-    penetration: float = math.nan
-    first_violation: int | None = None
-    note: str = ""
-    trace: Trace | None = field(default=None, repr=False)   # per-step records (not in the CSV)
-
-
 def scene_for(case, integrator: str, setting: Setting, reduced: bool) -> dict:
     raw = copy.deepcopy(case.scene(reduced))
     raw["time"].update(setting.time, integrator=integrator)
@@ -92,14 +77,11 @@ def scene_for(case, integrator: str, setting: Setting, reduced: bool) -> dict:
 
 
 def _config(raw, name):
-    from ..config.load import config_from_dict
     return config_from_dict(raw, ".", name)
 
 
 def _agreed(comm, fn):
     """fn() on every rank; (value, None) or (None, agreed config-error message)."""
-    from ..config import format_config_error
-    from ..config.schema import ConfigError
     value, err = None, None
     try:
         value = fn()
@@ -111,8 +93,6 @@ def _agreed(comm, fn):
 
 def _build(raw, case, comm, force=False):
     """(sim, note, None) or (None, note, refusal message); collective."""
-    from ..scene import build_model
-    from ..simulation import Simulation
     cfg, err = _agreed(comm, lambda: _config(raw, case.name))
     if err:
         return None, "", err
@@ -139,8 +119,6 @@ def _explicit_step(case, raw, comm, fraction):
     collective. The limit comes from a Simulation that is never prepared (so
     never refused at start-up); the case's hook does not change it (the
     Gershgorin bound is taken at the rest shape)."""
-    from ..scene import build_model
-    from ..simulation import Simulation
     cfg, err = _agreed(comm, lambda: _config(raw, case.name))
     if err:
         return None, err
@@ -154,9 +132,6 @@ def _explicit_step(case, raw, comm, fraction):
 
 def run_variant(case, integrator: str, setting: Setting, comm, reduced: bool = False) -> Result:
     """Simulate one variant and classify it; collective on ``comm``."""
-    from .measure import PenetrationOracle
-    from ..energy_guard import gravity_scale
-    from ..simulation import SimulationError
     t0 = time.perf_counter()
     raw = scene_for(case, integrator, setting, reduced)
     res = Result(case.name, integrator, setting.name, REFUSED, h=raw["time"]["step"])
@@ -184,7 +159,7 @@ def run_variant(case, integrator: str, setting: Setting, comm, reduced: bool = F
     try:
         for _ in range(res.steps_planned):
             sim.step()
-            trace.record(sim.time, *sim.energies(), oracle.worst(sim))
+            trace.record(sim.state.t, *sim.energies(), oracle.worst(sim))
     except SimulationError as exc:
         stop = (exc.step, str(exc))
     finally:
@@ -241,7 +216,6 @@ def add_arguments(p) -> None:
 
 
 def main(args, comm) -> int:
-    from .report import markdown, write_csv
     cases = [get_case(n) for n in args.cases] if args.cases else list(CASES)
     integrators = args.integrators or list(INTEGRATORS)
     settings = [SETTINGS[n] for n in args.settings]
@@ -261,7 +235,6 @@ def main(args, comm) -> int:
         text = markdown(results, cases, integrators, settings, reduced=args.reduced,
                         ranks=comm.size, wall=wall, command=command)
         if args.output:
-            import os
             os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
             with open(args.output, "w", encoding="utf-8") as f:
                 f.write(text)

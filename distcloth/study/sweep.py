@@ -21,6 +21,7 @@ outcome) and carries the study's wall time is not run again.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import itertools
 import math
@@ -28,16 +29,25 @@ import os
 import time
 from dataclasses import dataclass
 
+import h5py
 import numpy as np
+import yaml
 
+from ..config import ConfigError, format_config_error
+from ..config.load import apply_overrides, config_from_dict
+from ..config.schema import TimeSpec
+from ..io.console import Progress
+from ..io.h5read import read_attrs
 from ..linalg.presets import PRECONDITIONERS
+from ..run import open_writer, setup, write_steps
+from ..simulation import DIAGNOSTICS, SimulationError
 
 def _pc_overrides(options: dict, mat_type: str) -> dict:
     """One preset as scene overrides: pc_type, the matrix type where it is not
     the default BAIJ, then the preconditioner's own options."""
     out = {"solver.pc_type": options["pc_type"]}
     if mat_type != "baij":
-        out["solver.mat_type"] = mat_type
+        out["linear_system.mat_type"] = mat_type
     out.update({f"solver.{k}": v for k, v in options.items() if k != "pc_type"})
     return out
 
@@ -125,7 +135,6 @@ def _grid_pieces(raw: dict) -> list[int]:
 def expand(raw: dict, axis: str, value: str) -> tuple[str, ...]:
     """One axis value -> key.path=value overrides."""
     if axis == "resolution":
-        import yaml
         v = yaml.safe_load(value)
         res = v if isinstance(v, list) else [v, v]
         pieces = _grid_pieces(raw)
@@ -145,17 +154,14 @@ def _name(role: str, overrides) -> str:
 
 
 def _resolved_time_step(raw: dict, base_overrides) -> float:
-    from ..config.load import apply_overrides
     r = apply_overrides(raw, base_overrides)
     step = (r.get("time") or {}).get("step")
     if step is None:
-        from ..config.schema import TimeSpec
         return TimeSpec().step
     return float(step)
 
 
 def _resolved(raw: dict, overrides) -> dict:
-    from ..config.load import apply_overrides
     return apply_overrides(raw, tuple(overrides))
 
 
@@ -177,7 +183,6 @@ def _base_resolution(raw: dict, base_overrides) -> str | None:
 def _reference(raw, axes, base_overrides, reference_overrides, with_base=False) -> tuple:
     """The reference's overrides: smallest step / 4, finest resolution, tight solves;
     ``with_base``: the base scene is a variant too, so its step and mesh count."""
-    import yaml
     steps = [float(v) for v in axes.get("time.step", [])]
     if with_base or not steps:
         steps.append(_resolved_time_step(raw, base_overrides))
@@ -229,7 +234,6 @@ def finished(path: str) -> tuple[bool, str, float]:
     if not os.path.exists(path):
         return False, "", math.nan
     try:
-        from ..io.h5read import read_attrs
         attrs = read_attrs(path)
     except OSError:               # a file cut off mid-write: run it again
         return False, "", math.nan
@@ -243,8 +247,6 @@ def finished(path: str) -> tuple[bool, str, float]:
 def _config(raw, base_dir, source_name, overrides, every, comm):
     """The variant's checked configuration, built on rank 0 and broadcast
     (as the CLI does), or the config error's one line."""
-    from ..config import ConfigError, format_config_error
-    from ..config.load import apply_overrides, config_from_dict
     cfg = message = None
     if comm.rank == 0:
         try:
@@ -256,7 +258,7 @@ def _config(raw, base_dir, source_name, overrides, every, comm):
             cfg = config_from_dict(r, base_dir, source_name)
         except ConfigError as exc:
             message = format_config_error(exc)
-    return comm.bcast((cfg, message))
+    return comm.broadcast((cfg, message))
 
 
 def perturb_start(sim, amplitude: float, seed: int = 20240601) -> None:
@@ -265,14 +267,12 @@ def perturb_start(sim, amplitude: float, seed: int = 20240601) -> None:
     rng = np.random.default_rng(seed)
     d = rng.standard_normal((sim.model.num_vertices, 3))
     d *= amplitude / np.linalg.norm(d, axis=1, keepdims=True)
-    sim.x += d[sim.layout.local_input]
+    sim.state.x += d[sim.layout.local_input]
 
 
 def run_variant(cfg, comm, path: str, *, perturb: float = 0.0, progress: bool = False):
     """One run, as ``distcloth.run.run`` does it, into ``path``; collective.
     Returns (status, wall seconds of the slowest rank, message)."""
-    from ..run import open_writer, setup, write_steps
-    from ..simulation import DIAGNOSTICS, SimulationError
     t0 = time.perf_counter()
     sim, code = setup(cfg, comm, quiet=True)
     if code:
@@ -286,7 +286,6 @@ def run_variant(cfg, comm, path: str, *, perturb: float = 0.0, progress: bool = 
                          {"steps": n_steps, "output_every_steps": every, "study_perturb": perturb})
     sim.pipeline.run("output", writer)
     sim.pipeline.take_step_counters()
-    from ..simulation import Progress
     bar = Progress(comm, n_steps, enabled=progress)
     status, message = "completed", ""
     try:
@@ -298,17 +297,15 @@ def run_variant(cfg, comm, path: str, *, perturb: float = 0.0, progress: bool = 
     sim.destroy()
     wall = float(comm.max(np.array([time.perf_counter() - t0]))[0])
     if comm.rank == 0:         # the wall time marks the file as a finished study variant
-        import h5py
         with h5py.File(path, "a") as f:
             f.attrs[WALL_ATTR] = wall
-    comm.barrier()
+    comm.synchronize()
     return status, wall, message
 
 
 def warm_up(cfg, comm, directory: str) -> None:
     """One step of the first variant to run, thrown away: imports, numba
     compilation and PETSc's first set-up would otherwise be charged to it."""
-    import dataclasses
     cfg1 = dataclasses.replace(cfg, time=dataclasses.replace(cfg.time, end=cfg.time.step))
     path = os.path.join(directory, "_warmup.h5")
     run_variant(cfg1, comm, path)
@@ -316,7 +313,7 @@ def warm_up(cfg, comm, directory: str) -> None:
         for p in (path, path[:-3] + ".xdmf"):
             if os.path.exists(p):
                 os.remove(p)
-    comm.barrier()
+    comm.synchronize()
 
 
 def run_sweep(variants, raw: dict, base_dir: str, source_name: str, comm, directory: str, *,
@@ -326,12 +323,12 @@ def run_sweep(variants, raw: dict, base_dir: str, source_name: str, comm, direct
     raw = normalise_scene(raw)
     if comm.rank == 0:
         os.makedirs(directory, exist_ok=True)
-    comm.barrier()
+    comm.synchronize()
     outcomes = []
     warmed = False
     for i, var in enumerate(variants, 1):
         path = os.path.join(directory, var.name + ".h5")
-        done = comm.bcast(finished(path) if comm.rank == 0 else None)
+        done = comm.broadcast(finished(path) if comm.rank == 0 else None)
         head = f"[{i}/{len(variants)}] {var.role} {var.label()}"
         if done[0]:
             outcomes.append(Outcome(var, path, done[1], done[2], ran=False))

@@ -1,0 +1,446 @@
+"""Contact: the one module that decides how cloth meets bodies and itself.
+
+Read top to bottom, this is what a step does with contact (the kernels it
+calls are array functions in ``response.py``, ``friction.py``,
+``impulses.py``, ``imagespace.py`` and ``physics/contact_friction.py``):
+
+1. **Colliders** (``Collider``, built once from the scene): analytic shapes,
+   mesh colliders answered through BVH closest points (``mesh_query.py``) or
+   through image-space maps (``image_collider.py``, Vassilev et al. 2001 §4),
+   each with its thickness, friction, motion and, chosen here once for the
+   scene, its **friction law**: in the solve for implicit schemes
+   (``force:friction``), after the step for explicit ones, and Vassilev et
+   al.'s Eq. 15 for image-space colliders whatever the scheme.
+2. **Detection** (stage ``collision:bodies``, before the solve): a vertex
+   predicted to come within d = cloth + collider thickness becomes a
+   Baraff-Witkin constraint S = I - n n^T with the normal velocity that stops
+   it at d (EG07 tutorial Part 1 §2.3 names both constraint and impulse
+   responses; constraints for resting contact because the implicit solve
+   then sees the contact: no bouncing on a sphere or a plane at 5 ms steps,
+   which impulses after an unconstrained solve gave).
+3. **Constraints**: the contacts' (S, z), joined to the pins' by the driver.
+4. **Friction in the solve**: ``begin_attempt`` hands the contacts whose law
+   is in-solve to the friction force term.
+5. **Missed contacts**: a free vertex that ends the solve deeper than
+   MISSED_FRACTION d inside a body makes the driver solve the attempt again
+   with it as a contact.
+6. **Response** (stage ``collision:response``, after the solve): after-step
+   Coulomb friction or Eq. 15 on the contacts whose law says so, adhesive
+   contacts marked for release, the **position fail-safe** against the
+   distance fields, then the **triangle pipeline** of Bridson et al. 2002
+   (mesh colliders with method bvh, plane colliders as kinematic quads and,
+   with self_collision, cloth against cloth) on the motion that includes the
+   fail-safe's projection: proximity repulsion, CCD impulses and rigid
+   impact zones, on candidates the ranks find over the replicated BVH
+   (``parallel/collide.py``).
+
+Every rank computes the same contact for a shared vertex (ghosts included);
+the triangle pipeline runs on the all-gathered cloth from the canonical,
+sorted candidate set, so results depend neither on the order contacts were
+found in nor on which rank found them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..parallel.collide import build_collisions
+from ..physics.contact_friction import ContactFrictionTerm
+from .colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane, RigidMotion,
+                        Sphere, load_mesh_collider)
+from .image_collider import ImageSpaceCollider
+from .imagespace import velocity_response
+from .impulses import ReusedCandidates, resolve
+from .mesh_query import MeshProximity
+from .response import Contacts, contact_constraint, detect, friction, normal_impulse, project
+
+MAX_CONTACT_PASSES = 3   # solves per attempt at most when contacts were missed
+MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
+CANDIDATE_SLACK = 0.5    # the CCD passes of a step reuse their candidates while no end position
+                         # moved more than this fraction of the thickness (impulses.ReusedCandidates)
+
+# friction laws
+IN_SOLVE = "in_solve"        # a damping force of the implicit solve (physics/contact_friction.py)
+AFTER_STEP = "after_step"    # Coulomb clamp of the velocities after the step (response.friction)
+EQ15 = "eq15"                # Vassilev et al. 2001 Eq. 15: C_fric = 1 - mu keeps the tangential part
+
+ANALYTIC_SHAPES = {"plane": Plane, "sphere": Sphere, "capsule": Capsule, "box": Box}
+
+
+def friction_law(kind: str, implicit: bool) -> str:
+    """The friction law of a collider of ``kind`` under an implicit or explicit scheme."""
+    if kind == "image":
+        return EQ15
+    return IN_SOLVE if implicit else AFTER_STEP
+
+
+@dataclass
+class Collider:
+    """A body the cloth collides with, as the step sees it."""
+    name: str
+    kind: str                   # analytic | mesh | image
+    query: Callable             # (x, t, max_distance) -> (phi, normal, velocity) at x
+    friction: float             # Coulomb mu
+    thickness: float            # m, added to the cloth's
+    law: str                    # friction law (friction_law)
+    closed: bool = True         # has an inside: the position fail-safe applies
+    drive_end: float = 0.0      # s: the last keyframe or frame (it moves until then)
+    mesh: MeshCollider | None = None                  # in the triangle pipeline (bvh meshes)
+    image_error_bound: tuple[float, float] | None = None   # image-space maps: Eq. 14 (du, dv), m
+
+
+def rigid_motion(spec) -> RigidMotion | None:
+    """The collider's keyframed rigid motion, or None."""
+    if spec.motion is None:
+        return None
+    return RigidMotion(spec.motion.times, spec.motion.translations, spec.motion.rotations)
+
+
+def make_collider(spec, implicit: bool) -> Collider:
+    """The collider a scene's ``colliders:`` entry describes."""
+    motion = rigid_motion(spec)
+    drive_end = float(motion.times[-1]) if motion is not None else 0.0
+    common = dict(name=spec.name, friction=spec.friction, thickness=spec.thickness)
+    if spec.shape != "mesh":
+        body = AnalyticCollider(ANALYTIC_SHAPES[spec.shape](**dict(spec.geometry)), motion,
+                                spec.friction, spec.thickness)
+        return Collider(kind="analytic", query=lambda x, t, maxd: body.query(x, t),
+                        law=friction_law("analytic", implicit), drive_end=drive_end, **common)
+    mesh = load_mesh_collider(list(spec.files), frame_rate=spec.frame_rate, motion=motion,
+                              friction=spec.friction, thickness=spec.thickness)
+    if spec.scale != 1.0:
+        mesh.frames *= spec.scale
+    drive_end = max(drive_end, float(mesh.frame_times[-1]))
+    if spec.method == "image":
+        img = ImageSpaceCollider(mesh, resolution=tuple(spec.resolution),
+                                 axis="xyz".index(spec.axis))
+        return Collider(kind="image", query=img.query, law=friction_law("image", implicit),
+                        drive_end=drive_end,
+                        image_error_bound=tuple(float(e) for e in img.error_bound), **common)
+    prox = MeshProximity(mesh)
+    return Collider(kind="mesh", query=prox.query, law=friction_law("mesh", implicit),
+                    closed=bool(prox.closed), drive_end=drive_end, mesh=mesh, **common)
+
+
+def plane_quad(spec, rest_positions) -> MeshCollider:
+    """A plane collider as a kinematic two-triangle quad for the triangle
+    pipeline, far larger than the cloth (100 times its size plus 10 m), with
+    the plane's motion.  Bridson et al. 2002 push bodies through the same
+    impulses and impact zones as the cloth: a floor that only the contact
+    constraints and the position fail-safe knew about let the fail-safe lift
+    a layer of a pile through the layer above it."""
+    rest = np.asarray(rest_positions, dtype=np.float64)
+    corners, tris = Plane(**dict(spec.geometry)).quad(rest.mean(axis=0),
+                                                      100.0 * float(np.ptp(rest, axis=0).max()) + 10.0)
+    return MeshCollider(corners[None], tris, motion=rigid_motion(spec),
+                        friction=spec.friction, thickness=spec.thickness)
+
+
+@dataclass
+class ContactReport:
+    """What one attempt's contact response measured (this rank's part)."""
+    contacts: int = 0
+    max_penetration: float = -np.inf
+    projected_vertices: int = 0
+    impulse_hits: float = 0.0
+    impact_zone_vertices: float = 0.0
+    self_intersections: float = 0.0
+
+
+@dataclass
+class ContactResponse:
+    """The response stage's result: the corrected proposal and the contact
+    memory the step hands on if it is committed."""
+    x: np.ndarray
+    v: np.ndarray
+    released: np.ndarray | None       # (n_local,) bool, or None without body contacts
+    report: ContactReport = field(default_factory=ContactReport)
+
+
+class ContactModel:
+    """Contact of one rank's cloth: every method is collective."""
+
+    def __init__(self, cfg, model, layout, comm, ghosts, mass, held, implicit: bool):
+        self.comm, self.ghosts = comm, ghosts
+        self.n_owned, self.n_local = layout.n_owned, layout.n_local
+        self.mass = mass
+        self.self_collision = cfg.has("self_collision")
+        collider_specs = cfg.colliders if cfg.has("collisions") else ()
+        self.colliders = [make_collider(spec, implicit) for spec in collider_specs]
+        self.drive_end = max([c.drive_end for c in self.colliders] + [0.0])
+        thick = np.zeros(model.num_vertices)
+        for piece, spec in zip(model.pieces, cfg.cloth):
+            thick[piece.vertex_start:piece.vertex_stop] = spec.thickness
+        self.cloth_thickness = thick[layout.local_input]
+        self.thickness = float(thick.max(initial=0.0))     # the triangle pipeline's contact distance
+        self.never_contact = np.zeros(self.n_local, dtype=bool)   # pins keep their constraint
+        self.never_contact[held] = True
+        self.gravity_norm = float(np.linalg.norm(cfg.gravity)) if cfg.has("gravity") else 0.0
+        # friction as a force of the solve: the colliders whose law says so
+        self.in_solve = np.array([c.law == IN_SOLVE for c in self.colliders] + [False], dtype=bool)
+        self.friction_term = None
+        if any(c.law == IN_SOLVE and c.friction > 0.0 for c in self.colliders):
+            self.friction_term = ContactFrictionTerm(mass, self.n_owned)
+        self.pipeline_meshes = [c.mesh for c in self.colliders if c.mesh is not None]
+        self.detector = None
+        if self.pipeline_meshes or self.self_collision:
+            self.pipeline_meshes += [plane_quad(spec, model.rest_positions)
+                                     for spec in collider_specs if spec.shape == "plane"]
+            ws = cfg.work_stealing
+            self.detector = build_collisions(comm, model, layout, self.pipeline_meshes,
+                                             self.self_collision, stealing=ws.enabled, a=ws.a,
+                                             b=ws.b, chunk=ws.chunk)
+            self.input_mass = model.vertex_mass.astype(np.float64)
+            self.input_held = np.zeros(model.num_vertices, dtype=bool)   # kinematic for impulses
+            self.input_held[model.pinned] = True
+            if model.slide_vertices is not None:
+                self.input_held[model.slide_vertices] = True
+            self.owned_input = layout.owned_input
+            # one mu for the pipeline: the BVH mesh colliders' (plane quads leave
+            # their friction to the contact constraints)
+            self.pipeline_friction = max([c.friction for c in self.colliders if c.kind == "mesh"]
+                                         + [0.0])
+
+    @property
+    def has_bodies(self) -> bool:
+        return bool(self.colliders)
+
+    @property
+    def has_response(self) -> bool:
+        return bool(self.colliders) or self.detector is not None
+
+    @property
+    def d_max(self) -> float:
+        """The largest contact distance d (cloth + collider thickness)."""
+        return float(np.max(self.cloth_thickness, initial=0.0)) + max(
+            [c.thickness for c in self.colliders] + [0.0])
+
+    def image_error_bounds(self) -> dict[str, tuple[float, float]]:
+        return {c.name: c.image_error_bound for c in self.colliders if c.image_error_bound}
+
+    # ------------------------------------------------------------ queries
+    def query(self, x, t, margin=np.inf):
+        """(phi (k, n), normal (k, n, 3), velocity (k, n, 3), d (k, n)) at x;
+        phi = +inf where a mesh collider is farther than ``margin``."""
+        k, n = len(self.colliders), x.shape[0]
+        phis, normals, vels = np.empty((k, n)), np.zeros((k, n, 3)), np.zeros((k, n, 3))
+        offsets = np.empty((k, n))
+        for j, c in enumerate(self.colliders):
+            offsets[j] = self.cloth_thickness[:n] + c.thickness
+            maxd = margin if np.isscalar(margin) else float(np.max(margin[j], initial=0.0))
+            phis[j], normals[j], vels[j] = c.query(x, t, maxd)
+        return phis, normals, vels, offsets
+
+    # --------------------------------------------------- 2. detection
+    def detect(self, state, h: float, missed=None) -> Contacts:
+        """The contact set of the attempt on every local vertex (owned and
+        ghosts). ``missed`` (k, n_local) bool: contacts an earlier pass of the
+        attempt missed (they join whatever their prediction says)."""
+        x, v = state.x, state.v
+        speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", v, v), initial=0.0)))
+        reach = self.d_max + h * speed + h * h * self.gravity_norm    # how far a vertex can get this step
+        phis, normals, vels, offsets = self.query(x, state.t, np.inf if missed is not None else reach)
+        margin = offsets + h * h * self.gravity_norm
+        penetrating = np.any(phis < offsets, axis=0)
+        exclude = self.never_contact | (state.released & ~penetrating)
+        if missed is not None:
+            exclude = exclude & ~missed.any(axis=0)
+            margin = np.where(missed, np.inf, margin)
+        frictions = np.array([c.friction for c in self.colliders])
+        return detect(phis, normals, vels, v, offsets, frictions, h, margin, exclude)
+
+    # ------------------------------------------------- 3. constraints
+    @staticmethod
+    def constraints(contacts: Contacts, v):
+        """(index, S, z) of the contacts (never on held vertices)."""
+        S, z = contact_constraint(contacts, v)
+        return contacts.index, S, z
+
+    # ---------------------------------------------- 4. friction in the solve
+    def begin_attempt(self, contacts: Contacts, h: float) -> None:
+        if self.friction_term is not None:
+            use = self.in_solve[contacts.collider] if contacts.collider.size \
+                else np.zeros(0, dtype=bool)
+            self.friction_term.begin_step(contacts, h, use)
+
+    # ------------------------------------------------- 5. missed contacts
+    def missed_contacts(self, contacts: Contacts, x_end, t_end: float, missed):
+        """(k, n_local) bool of free vertices ending deeper than MISSED_FRACTION d
+        inside a collider without a contact constraint (accumulated over the
+        passes), or None if there is none on any rank."""
+        n, k = self.n_owned, len(self.colliders)
+        phis, _, _, offsets = self.query(x_end, t_end, self.d_max)
+        free = ~self.never_contact[:n]
+        free[contacts.index[contacts.index < n]] = False
+        deep = (offsets - phis > MISSED_FRACTION * offsets) & free[None]
+        if self.comm.max(np.array([float(deep.any())]))[0] == 0.0:
+            return None
+        flags = np.zeros((self.n_local, k))
+        flags[:n] = deep.T
+        self.ghosts.update(flags)
+        new = flags.T > 0.5
+        return new if missed is None else (new | missed)
+
+    # ------------------------------------------------------- 6. response
+    def respond(self, state, contacts: Contacts | None, result, h: float) -> ContactResponse:
+        """After the solve: friction of the after-step laws on the contacts,
+        adhesive contacts marked for release, the position fail-safe, the
+        triangle pipeline.  ``result``: the integrator's StepResult (proposed
+        owned rows, start forces, position gain)."""
+        n = self.n_owned
+        x_new, v_new = result.x.copy(), result.v.copy()
+        gain = result.position_gain
+        report = ContactReport()
+        released = None
+        if contacts is not None:
+            flags = np.zeros((self.n_local, 1))
+            mine = contacts.index < n
+            idx = contacts.index[mine]
+            report.contacts = int(idx.size)
+            if idx.size:
+                normal = contacts.normal[mine]
+                v_free = state.v[idx] + h * result.start_forces[idx] / self.mass[idx, None]
+                dvn = normal_impulse(v_new[idx], v_free, normal)
+                flags[idx[dvn < 0.0], 0] = 1.0
+                v_after = self._after_step_friction(v_new[idx], contacts, mine, dvn)
+                x_new[idx] += gain * (v_after - v_new[idx])
+                v_new[idx] = v_after
+            self.ghosts.update(flags)
+            released = flags[:, 0] > 0.5
+        # the fail-safe before the triangle pipeline: its projection is then
+        # part of the motion the CCD checks, so lifting a layer out of a body
+        # cannot carry it through the layer above
+        t_end = state.t + h
+        if self.colliders:
+            x_new, v_new, report.max_penetration, report.projected_vertices = \
+                self._failsafe(x_new, v_new, t_end)
+        if self.detector is not None:
+            x_new, v_new = self._triangle_contact(state, x_new, v_new, h, gain, report)
+            if self.self_collision:
+                report.self_intersections = float(self._count_crossings(x_new, t_end))
+        return ContactResponse(x_new, v_new, released, report)
+
+    def _after_step_friction(self, v, contacts: Contacts, mine, dvn):
+        """The velocities of this rank's contacts after the after-step laws."""
+        laws = np.array([c.law for c in self.colliders])[contacts.collider[mine]]
+        mu = contacts.friction[mine]
+        body_v = contacts.velocity[mine]
+        normal = contacts.normal[mine]
+        out = v.copy()
+        coulomb = laws == AFTER_STEP
+        if np.any(mu[coulomb] > 0):
+            out[coulomb] = friction(v[coulomb], body_v[coulomb], normal[coulomb], mu[coulomb],
+                                    dvn[coulomb])
+        eq15 = laws == EQ15
+        if eq15.any():      # Eq. 15: C_fric keeps 1 - mu of the tangential velocity
+            out[eq15] = velocity_response(v[eq15], normal[eq15], body_v[eq15],
+                                          np.maximum(0.0, 1.0 - mu[eq15]), 0.0)
+        return out
+
+    def _failsafe(self, x_new, v_new, t_end):
+        """Distance-field colliders at the end of the step: vertices inside
+        moved out along n (inward relative normal velocity removed).  The
+        penetration it reports is what the solve (and friction) left.
+        Open meshes are left to the triangle pipeline (a distance cannot say
+        on which side of a zero-thickness panel a vertex belongs)."""
+        n = self.n_owned
+        free = ~self.never_contact[:n]
+        reach = self.d_max
+        phis, normals, vels, offsets = self.query(x_new, t_end, reach)
+        pen = float(np.max((offsets - phis)[:, free], initial=-np.inf))
+        moved = np.zeros(n, dtype=bool)
+        for j, c in enumerate(self.colliders):
+            if not c.closed:
+                continue
+            if moved.any():     # an earlier collider's projection moved vertices: query again
+                phis[j], normals[j], vels[j] = c.query(x_new, t_end, reach)
+            xs, vs, inside = project(x_new[free], v_new[free], phis[j][free], normals[j][free],
+                                     vels[j][free], offsets[j][free])
+            x_new[free], v_new[free] = xs, vs
+            moved[np.nonzero(free)[0][inside]] = True
+        return x_new, v_new, pen, int(moved.sum())
+
+    def _triangle_contact(self, state, x_new, v_new, h, gain, report):
+        """Bridson et al. 2002 on the all-gathered cloth plus the mesh
+        colliders' vertices (infinite mass); every rank runs it on the same
+        canonical candidates and keeps its own rows."""
+        det = self.detector
+        n = self.n_owned
+        t0, t1 = state.t, state.t + h
+        rows = det.gather(np.concatenate([state.x[:n], x_new], axis=1))
+        X0 = np.concatenate([rows[:, :3]] + [m.vertices(t0) for m in self.pipeline_meshes])
+        X1 = np.concatenate([rows[:, 3:]] + [m.vertices(t1) for m in self.pipeline_meshes])
+        U = (X1 - X0) / h
+        inv_mass = np.zeros(X0.shape[0])
+        free = ~self.input_held
+        inv_mass[:det.geometry.n_cloth][free] = 1.0 / self.input_mass[free]
+        g = det.geometry
+        found = ReusedCandidates(det.candidates, self.thickness, CANDIDATE_SLACK * self.thickness)
+        U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness,
+                            self.pipeline_friction, found, hits=det.shared_hits)
+        mine = self.owned_input
+        dU = U2[mine] - U[mine]
+        report.impulse_hits = float(sum(stats["ccd_hits"]))
+        report.impact_zone_vertices = float(stats.get("zone_vertices", 0))
+        return x_new + h * dU, v_new + dU * (h / gain)
+
+    def _count_crossings(self, x_new, t1) -> int:
+        """Cloth triangle pairs crossing at the end of the step (after the
+        fail-safe: what the step hands on)."""
+        det = self.detector
+        X = np.concatenate([det.gather(x_new[:self.n_owned])]
+                           + [m.vertices(t1) for m in self.pipeline_meshes])
+        return det.count_intersections(X)
+
+    # ------------------------------------------------------ diagnostics
+    def diagnostics(self, report: ContactReport | None) -> dict:
+        """Global counts and maxima of the committed step's response."""
+        report = report or ContactReport()
+        out = {}
+        if self.colliders:
+            sums = self.comm.sum(np.array([float(report.contacts),
+                                           float(report.projected_vertices)]))
+            pen = self.comm.max(np.array([float(report.max_penetration)]))[0]
+            out.update(contacts=sums[0], max_penetration=pen, projected_vertices=sums[1])
+        if self.detector is not None:     # replicated values: the same on every rank
+            out["impulse_hits"] = report.impulse_hits
+            out["impact_zone_vertices"] = report.impact_zone_vertices
+            if self.self_collision:
+                out["self_intersections"] = report.self_intersections
+            out.update(self._traversal_diagnostics())
+        return out
+
+    def traversal_summary(self) -> str | None:
+        """One line on the run's BVH traversals (load balance, stealing), for
+        the log; None without a detector."""
+        if self.detector is None:
+            return None
+        c = self.detector.counters
+        busy = np.array([c["busy_time"]])
+        bmax, bsum = self.comm.max(busy)[0], self.comm.sum(busy)[0]
+        counts = self.comm.sum(np.array([c["tasks_created"], c["tasks_stolen"],
+                                         c["steals_refused"], c["tests"]], dtype=np.float64))
+        wall = self.comm.max(np.array([c["traverse_time"]]))[0]
+        mean = bsum / self.comm.size
+        ratio = bmax / mean if mean > 0 else 1.0
+        mode = "stealing" if self.detector.stealing else "static"
+        return (f"BVH traversal ({mode}): {c['refits']} phases, {wall:.2f} s wall, "
+                f"busy max/mean {ratio:.2f}, {int(counts[3])} tests, {int(counts[0])} tasks "
+                f"created, {int(counts[1])} stolen, {int(counts[2])} refused")
+
+    def _traversal_diagnostics(self) -> dict:
+        """The step's BVH traversal over the ranks: busy is CPU time inside
+        traversal chunks, not polling; the balance figure is
+        traverse_busy_max / traverse_busy_mean."""
+        st = self.detector.take_step_stats()
+        mx = self.comm.max(np.array([st["busy"], st["wall"], st["latency_max"]]))
+        sm = self.comm.sum(np.array([st["busy"], st["idle"], st["tests"], st["tasks_created"],
+                                     st["tasks_stolen"], st["steals_refused"], st["msgs_sent"]],
+                                    dtype=np.float64))
+        p = self.comm.size
+        return dict(traverse_wall=mx[1], traverse_busy_max=mx[0], traverse_busy_mean=sm[0] / p,
+                    traverse_idle_mean=sm[1] / p, traverse_tests=sm[2], tasks_created=sm[3],
+                    tasks_stolen=sm[4], steals_refused=sm[5], steal_messages=sm[6],
+                    steal_latency_max=mx[2])

@@ -1,0 +1,179 @@
+"""Rules that tie several keys of a scene together, one small function per
+section type; everything a single field says about itself is in its
+description (schema.py) and checked by walk.py.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+from .checks import join
+from .describe import entries, entry, needs
+from .fabrics import FABRICS
+from .schema import (FEM_ONLY, MESH_ONLY, SHAPE_KEYS, ColliderGeometry, ColliderSpec, ConfigError,
+                     MaterialSpec, MotionSpec, PinSpec, SceneConfig, TimeSpec)
+from .walk import Context, Rules, read_field, required_text
+
+PER_TIME = ("translations", "rotations")     # MotionSpec keys with one entry per time
+
+
+def _pin(pin: PinSpec, section: dict, key: str, ctx: Context) -> PinSpec:
+    """Grid selectors need a grid; indices must exist on a grid (a file mesh's
+    vertex count is known only once the scene builder reads it); a box needs
+    both corners, in order."""
+    grid = ctx.parent["mesh"].grid
+    for kind in ("edge", "corner"):
+        if getattr(pin, kind) is not None and grid is None:
+            raise ConfigError(join(key, kind), section[kind],
+                              f"{kind} pins only on grid meshes; use indices or box")
+    if pin.indices is not None and grid is not None:
+        count = grid.resolution[0] * grid.resolution[1]
+        for i, index in enumerate(pin.indices):
+            if index >= count:
+                raise ConfigError(join(join(key, "indices"), i), index,
+                                  f"a vertex index 0 <= i < {count} (the grid's vertex count)")
+    if section.get("box") is not None:
+        for name in ("box_min", "box_max"):
+            if getattr(pin, name) is None:
+                e = entry(PinSpec, name)
+                raise ConfigError(join(key, e.key), None, required_text(e))
+        if any(a > b for a, b in zip(pin.box_min, pin.box_max)):
+            raise ConfigError(join(key, "box"), section["box"], "min <= max in every component")
+    return pin
+
+
+def _material_preset(section: dict, key: str, ctx: Context) -> dict:
+    """A preset's values, a continuum membrane unless the scene says otherwise,
+    and every value the scene gives on top."""
+    preset = read_field(MaterialSpec, "preset", section, key, ctx)
+    if preset is None:
+        return section
+    if section.get("model") not in (None, "fem"):
+        raise ConfigError(join(key, "model"), section["model"],
+                          "fem with a preset (presets are continuum fabrics)")
+    base = {k: v for k, v in FABRICS[preset].items() if k != "source"}
+    return {"model": "fem", **base, **{k: v for k, v in section.items() if v is not None}}
+
+
+def _material(material: MaterialSpec, section: dict, key: str, ctx: Context) -> MaterialSpec:
+    if material.model == "mass_spring":
+        if material.bending_model not in (None, "flexion"):
+            raise ConfigError(join(key, "bending_model"), section["bending_model"],
+                              FEM_ONLY.message)
+        return material
+    if material.bending_model == "flexion":
+        raise ConfigError(join(key, "bending_model"), "flexion",
+                          "dihedral, isometric, dihedral_shell or isometric_shell with model: fem")
+    e_weft, e_warp, nu_weft, nu_warp, _ = material.orthotropic()
+    # Eq. 22 of the EG07 tutorial, Part 1 is symmetric only when nu_weft E_warp = nu_warp E_weft
+    if abs(nu_weft * e_warp - nu_warp * e_weft) > 1e-9 * max(nu_weft * e_warp, nu_warp * e_weft,
+                                                             1e-300):
+        raise ConfigError(join(key, "nu_warp"), nu_warp,
+                          f"nu_warp = nu_weft * E_warp / E_weft = {nu_weft * e_warp / e_weft:.6g} "
+                          "(otherwise the stiffness of the EG07 tutorial, Part 1 Eq. 22 is not "
+                          "symmetric)")
+    if nu_weft * nu_warp >= 1.0:
+        raise ConfigError(join(key, "nu_warp"), nu_warp, "nu_weft * nu_warp < 1")
+    curves = [e.key for e in entries(MaterialSpec) if e.setting.read == "curve"]
+    if material.strain != "stvk" and any(getattr(material, c) is not None for c in curves):
+        raise ConfigError(join(key, "strain"), material.strain,
+                          "stvk with " + " / ".join(curves) + " tables")
+    return material
+
+
+def _collider_keys(section: dict, key: str, ctx: Context) -> dict:
+    """A shape takes its own geometry keys and, a mesh, the mesh keys; any
+    other shape's key is refused before the values are read."""
+    shape = read_field(ColliderSpec, "shape", section, key, ctx)
+    mesh_keys = tuple(e.key for e in entries(ColliderSpec) if needs(ColliderSpec, e, MESH_ONLY))
+    takes = SHAPE_KEYS[shape] + (tuple(k for k in mesh_keys if k not in SHAPE_KEYS[shape])
+                                 if shape == "mesh" else ())
+    for other in tuple(e.key for e in entries(ColliderGeometry)) + mesh_keys:
+        if other not in takes and section.get(other) is not None:
+            raise ConfigError(join(key, other), section[other],
+                              f"not a key of a {shape}; a {shape} takes " + ", ".join(takes))
+    return section
+
+
+def _collider(spec: ColliderSpec, section: dict, key: str, ctx: Context) -> ColliderSpec:
+    """Every key of the shape given; a mesh sequence needs its frame rate."""
+    for name in SHAPE_KEYS[spec.shape]:
+        if section.get(name) is None:
+            e = next(e for t in (ColliderGeometry, ColliderSpec) for e in entries(t)
+                     if e.key == name)
+            raise ConfigError(join(key, name), None, required_text(e))
+    given = dict(spec.geometry)
+    geometry = tuple((name, given[name]) for name in SHAPE_KEYS[spec.shape] if name in given)
+    if len(spec.files) > 1 and spec.frame_rate is None:
+        raise ConfigError(join(key, "frame_rate"), None,
+                          "frames per second (> 0): needed with a list of files")
+    if len(spec.files) == 1 and spec.frame_rate is not None:
+        raise ConfigError(join(key, "frame_rate"), spec.frame_rate,
+                          "only with a list of files (a sequence)")
+    return replace(spec, geometry=geometry)
+
+
+def _motion_per_time(section: dict, key: str, ctx: Context) -> dict:
+    """Times strictly increasing; one translation and one rotation per time."""
+    times = read_field(MotionSpec, "times", section, key, ctx)
+    for i in range(1, len(times)):
+        if not times[i] > times[i - 1]:
+            raise ConfigError(join(join(key, "times"), i), times[i],
+                              f"a time > {times[i - 1]:g} (times strictly increasing)")
+    for name in PER_TIME:
+        raw = section.get(name)
+        if raw is not None and (not isinstance(raw, list) or len(raw) != len(times)):
+            raise ConfigError(join(key, name), raw,
+                              f"a list of {len(times)} {entry(MotionSpec, name).setting.what}")
+    return section
+
+
+def _motion_zeros(motion: MotionSpec, section: dict, key: str, ctx: Context) -> MotionSpec:
+    """Zero translations and rotations where none are given."""
+    zeros = ((0.0, 0.0, 0.0),) * len(motion.times)
+    return replace(motion, **{name: zeros for name in PER_TIME if not getattr(motion, name)})
+
+
+def _time(time: TimeSpec, section: dict, key: str, ctx: Context) -> TimeSpec:
+    if time.step > time.end:
+        raise ConfigError(join(key, "step"), time.step,
+                          f"a number > 0 and <= time.end ({time.end:g})")
+    return time
+
+
+def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneConfig:
+    _unique_names(config.cloth, "cloth", "piece")
+    for i, name in enumerate(config.effects):
+        if name in config.effects[:i]:
+            raise ConfigError(join("effects", i), name, "each effect at most once")
+    if config.output.every < config.time.step:
+        raise ConfigError("output.every", config.output.every,
+                          f"a number >= time.step ({config.time.step:g}): frames cannot be more "
+                          "frequent than steps")
+    if config.solver_options.get("pc_type") == "gamg" and config.linear_system.mat_type == "baij":
+        raise ConfigError("solver.pc_type", "gamg", "gamg with linear_system.mat_type: aij "
+                          "(PETSc's GAMG cannot build its graph from the default BAIJ matrix)")
+    if "collisions" in config.effects and not config.colliders:
+        raise ConfigError("effects", list(config.effects),
+                          "the collisions effect needs at least one entry under colliders:")
+    _unique_names(config.colliders, "colliders", "collider")
+    return config
+
+
+def _unique_names(items: tuple[Any, ...], key: str, noun: str) -> None:
+    first: dict[str, int] = {}
+    for i, item in enumerate(items):
+        if item.name in first:
+            raise ConfigError(join(join(key, i), "name"), item.name,
+                              f"a name no other {noun} has ({key}.{first[item.name]} has it)")
+        first[item.name] = i
+
+
+RULES: dict[type, Rules] = {
+    PinSpec: Rules(after=_pin),
+    MaterialSpec: Rules(before=_material_preset, after=_material),
+    ColliderSpec: Rules(before=_collider_keys, after=_collider),
+    MotionSpec: Rules(before=_motion_per_time, after=_motion_zeros),
+    TimeSpec: Rules(after=_time),
+    SceneConfig: Rules(after=_scene),
+}

@@ -1,0 +1,58 @@
+"""The contract every force term keeps, and the element selection they share.
+
+A term sees local arrays (owned vertices first, then ghosts) and never a
+communicator:
+
+* ``stencils()``: element vertex lists whose blocks it writes, fixed for the
+  run, from which the matrix sparsity is built once;
+* ``bind(pattern)``: remember where its blocks go in the value array;
+* ``evaluate(x, v, force, want_jac)``: add its forces to ``force`` and keep
+  what the Jacobian needs;
+* ``stiffness_product(w, out)``: out += (df/dx) w at the last evaluation;
+* ``add_to_system(data, alpha, beta)``: add its part of
+  A = M - beta df/dv - alpha df/dx to the block values;
+* ``energy(x)``: its potential energy only (0 for dissipative terms),
+  weighted so that the ranks' sums add up to the global value once;
+* ``max_strain(x)``: its largest engineering strain (stretch - 1) at x, 0 for
+  terms that do not stretch the membrane.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class ForceTerm:
+    name = "force"
+    has_jacobian = True
+
+    def stencils(self):
+        return []
+
+    def bind(self, pattern):
+        pass
+
+    def evaluate(self, x, v, force, want_jac):
+        pass
+
+    def stiffness_product(self, w, out):
+        pass
+
+    def add_to_system(self, data, alpha, beta):
+        pass
+
+    def energy(self, x):
+        return 0.0
+
+    def max_strain(self, x):
+        return 0.0
+
+
+def local_elements(elements: np.ndarray, layout):
+    """Elements with at least one owned vertex, in local numbering, and the
+    fraction of their vertices this rank owns (their energy weight)."""
+    el = layout.input_to_local()[elements]
+    owned = (el >= 0) & (el < layout.n_owned)
+    keep = owned.any(axis=1)
+    if np.any(el[keep] < 0):      # the ghost layer covers every matrix-graph neighbour
+        raise RuntimeError("an element with an owned vertex reaches beyond the ghost layer")
+    return el[keep], owned[keep].sum(axis=1) / elements.shape[1], np.nonzero(keep)[0]

@@ -1,0 +1,79 @@
+"""What an integrator (or a relaxation) may do with the cloth during a step.
+
+A narrow interface over the force terms, the assembled system, the linear
+solver, the ghost exchange and global reductions, each operation charged to
+its stage of the pipeline.  It holds no state of the step: positions and
+velocities come in as arguments (from the State), results go out as arrays.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .stages import FORCE_STAGES
+
+
+class StepContext:
+    def __init__(self, n_owned: int, mass: np.ndarray, terms, pipeline, ghosts, comm):
+        self.n_owned = n_owned
+        self.n_local = mass.shape[0]
+        self.mass = mass                 # (n_local,) lumped vertex masses
+        self.terms = terms
+        self.pipeline = pipeline
+        self.ghosts = ghosts
+        self.comm = comm
+
+    def forces(self, x, v, want_jac: bool) -> np.ndarray:
+        """Sum of the enabled force terms on every local row (each term is a stage);
+        with ``want_jac`` the terms keep what the system and products need."""
+        f = np.zeros((self.n_local, 3))
+        for name in FORCE_STAGES:
+            self.pipeline.run(name, x, v, f, want_jac)
+        return f
+
+    def stiffness_product(self, w) -> np.ndarray:
+        """(df/dx) w at the last evaluation, on every local row."""
+        out = np.zeros((self.n_local, 3))
+        for t in self.terms:
+            if t.has_jacobian and self.pipeline.enabled(t.name):
+                t.stiffness_product(w, out)
+        return out
+
+    def assemble(self, alpha: float, beta: float, gamma: float = 1.0) -> np.ndarray:
+        """Block values of A = gamma M - beta df/dv - alpha df/dx (owned rows)."""
+        return self.pipeline.run("assembly", alpha, beta, gamma)
+
+    def solve(self, data, rhs, cons):
+        """(dv on the owned rows, solve info) of A dv = rhs under the constraints."""
+        return self.pipeline.run("solve", data, rhs, cons)
+
+    def local_array(self, owned_rows: np.ndarray) -> np.ndarray:
+        """(n_local, k): the owned rows with their ghost copies filled in."""
+        a = np.zeros((self.n_local, owned_rows.shape[1]))
+        a[: self.n_owned] = owned_rows
+        self.ghosts.update(a)
+        return a
+
+    def update_ghosts(self, *arrays: np.ndarray) -> None:
+        self.ghosts.update(*arrays)
+
+    def project(self, cons, rows):
+        """S applied to the constrained owned rows of an (n_owned, 3) array."""
+        out = rows.copy()
+        owned = cons.index < self.n_owned
+        idx = cons.index[owned]
+        out[idx] = np.einsum("nij,nj->ni", cons.S[owned], rows[idx])
+        return out
+
+    def global_norm(self, rows) -> float:
+        """The 2-norm over the ranks of the owned rows ``rows``."""
+        return math.sqrt(self.comm.sum(np.array([float(np.sum(rows * rows))]))[0])
+
+    def global_sum(self, *values: float) -> np.ndarray:
+        """Each value summed over the ranks."""
+        return self.comm.sum(np.array(values, dtype=np.float64))
+
+    def global_max(self, *values: float) -> np.ndarray:
+        """Each value's maximum over the ranks."""
+        return self.comm.max(np.array(values, dtype=np.float64))
