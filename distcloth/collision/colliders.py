@@ -440,3 +440,13 @@ def load_mesh_collider(paths, frame_times=None, frame_rate: float | None = None,
         raise ValueError(f"mesh sequence: {len(paths)} files but {frame_times.shape[0]} frame times")
     return MeshCollider.sequence([v for v, _ in meshes], tri0, frame_times, motion,
                                  friction, thickness)
+
+
+def load_collider_mesh(spec, motion: RigidMotion | None = None) -> MeshCollider:
+    """The mesh collider a scene's ``colliders:`` entry describes (``shape: mesh``):
+    its file or frame sequence, scaled, with the entry's rigid ``motion``."""
+    mesh = load_mesh_collider(list(spec.files), frame_rate=spec.frame_rate, motion=motion,
+                              friction=spec.friction, thickness=spec.thickness)
+    if spec.scale != 1.0:
+        mesh.frames *= spec.scale
+    return mesh

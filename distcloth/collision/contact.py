@@ -49,7 +49,7 @@ import numpy as np
 from ..parallel.collide import build_collisions
 from ..physics.contact_friction import ContactFrictionTerm
 from .colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane, RigidMotion,
-                        Sphere, load_mesh_collider)
+                        Sphere, load_collider_mesh)
 from .image_collider import ImageSpaceCollider
 from .imagespace import velocity_response
 from .impulses import ReusedCandidates, resolve
@@ -85,6 +85,7 @@ class Collider:
     friction: float             # Coulomb mu
     thickness: float            # m, added to the cloth's
     law: str                    # friction law (friction_law)
+    body: AnalyticCollider | MeshCollider   # geometry and motion (pictures, checks)
     closed: bool = True         # has an inside: the position fail-safe applies
     drive_end: float = 0.0      # s: the last keyframe or frame (it moves until then)
     mesh: MeshCollider | None = None                  # in the triangle pipeline (bvh meshes)
@@ -106,21 +107,18 @@ def make_collider(spec, implicit: bool) -> Collider:
     if spec.shape != "mesh":
         body = AnalyticCollider(ANALYTIC_SHAPES[spec.shape](**dict(spec.geometry)), motion,
                                 spec.friction, spec.thickness)
-        return Collider(kind="analytic", query=lambda x, t, maxd: body.query(x, t),
+        return Collider(kind="analytic", query=lambda x, t, maxd: body.query(x, t), body=body,
                         law=friction_law("analytic", implicit), drive_end=drive_end, **common)
-    mesh = load_mesh_collider(list(spec.files), frame_rate=spec.frame_rate, motion=motion,
-                              friction=spec.friction, thickness=spec.thickness)
-    if spec.scale != 1.0:
-        mesh.frames *= spec.scale
+    mesh = load_collider_mesh(spec, motion)
     drive_end = max(drive_end, float(mesh.frame_times[-1]))
     if spec.method == "image":
         img = ImageSpaceCollider(mesh, resolution=tuple(spec.resolution),
                                  axis="xyz".index(spec.axis))
-        return Collider(kind="image", query=img.query, law=friction_law("image", implicit),
-                        drive_end=drive_end,
+        return Collider(kind="image", query=img.query, body=mesh,
+                        law=friction_law("image", implicit), drive_end=drive_end,
                         image_error_bound=tuple(float(e) for e in img.error_bound), **common)
     prox = MeshProximity(mesh)
-    return Collider(kind="mesh", query=prox.query, law=friction_law("mesh", implicit),
+    return Collider(kind="mesh", query=prox.query, body=mesh, law=friction_law("mesh", implicit),
                     closed=bool(prox.closed), drive_end=drive_end, mesh=mesh, **common)
 
 
