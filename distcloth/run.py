@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from .collision.surfaces import collider_surfaces
 from .config import format_config_error
 from .config.schema import ConfigError
 from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
@@ -60,7 +61,8 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
 
 
 def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
-    """The run's result file, with what the run was (collective)."""
+    """The run's result file, with what the run was and the colliders' surfaces,
+    which every frame then records (collective)."""
     lay = sim.layout
     attrs = {
         "scene": cfg.scene, "ranks": comm.size, "integrator": cfg.time.integrator,
@@ -75,7 +77,9 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
     return ResultWriter(path, comm if comm.under_mpiexec else None,
                         rest_positions=sim.model.rest_positions, triangles=sim.model.triangles,
                         owned_input=lay.owned_input, part=lay.part, config_text=cfg.source_text,
-                        attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names)
+                        attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names,
+                        colliders=collider_surfaces(sim.contact.colliders,
+                                                    sim.model.rest_positions))
 
 
 def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
@@ -155,7 +159,8 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     log(comm, f"draping ({spec.method}) into {os.path.abspath(path)}: residual tolerance "
               f"{spec.tolerance:g}, at most {spec.max_iterations} iterations")
     relax = Relaxation(sim, spec)
-    writer.write_frame(0, 0.0, sim.owned_positions())
+    # a frame's 'time' is the iteration; the colliders are drawn where the state's time puts them
+    writer.write_frame(0, 0.0, sim.owned_positions(), body_time=sim.state.t)
     bar = Progress(comm, spec.max_iterations, enabled=not quiet)
     status, code, k = "completed", 0, 0
     try:
@@ -165,7 +170,7 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
             writer.write_step(k, float(k), diag, times, calls)
             done = drape_converged(diag, spec)
             if done or k % spec.frame_every == 0 or k == spec.max_iterations:
-                writer.write_frame(k, float(k), sim.owned_positions())
+                writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t)
             bar.update(k, float(k))
             if done:
                 break

@@ -21,7 +21,8 @@ from .config.schema import DEFAULT_SOLVER, ConfigError
 from .energy_guard import EnergyGuard, gravity_scale
 from .integrate import make_integrator
 from .io.console import log
-from .linalg.assembly import assemble_blocks, gershgorin_bound, solve_constrained
+from .linalg.assembly import (assemble_blocks, constraint_impulses, gershgorin_bound,
+                              solve_constrained)
 from .linalg.constraints import Constraints, filter_system
 from .linalg.pattern import BlockPattern
 from .linalg.petsc import current_options, insert_scene_options, remove_options, unused_options
@@ -37,7 +38,8 @@ from .step_context import StepContext
 DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_energy",
                "total_energy", "max_strain", "max_speed", "newton_iterations",
                "newton_residual", "ksp_iterations", "ksp_residual", "rejected_steps", "newton_unconverged",
-               "contacts", "max_penetration", "projected_vertices", "impulse_hits",
+               "contacts", "max_penetration", "projected_vertices", "contact_work",
+               "friction_work", "failsafe_work", "impulse_work", "impulse_hits",
                "impact_zone_vertices", "self_intersections", "traverse_wall",
                "traverse_busy_max", "traverse_busy_mean", "traverse_idle_mean", "traverse_tests",
                "tasks_created", "tasks_stolen", "steals_refused", "steal_messages",
@@ -70,8 +72,7 @@ class Simulation:
         local = lay.local_input
         self.mass = model.vertex_mass[local].copy()
         self.state = State(x=model.start_positions()[local].astype(np.float64).copy(),
-                           v=model.start_velocities()[local].astype(np.float64).copy(),
-                           released=np.zeros(self.n_local, dtype=bool))
+                           v=model.start_velocities()[local].astype(np.float64).copy())
         self._hold(model, lay)
         self.ghosts = GhostExchange(lay, comm)
         self.integrator = make_integrator(cfg)
@@ -251,7 +252,13 @@ class Simulation:
                                gamma)
 
     def _solve(self, data, rhs, cons):
-        return solve_constrained(self.system, self.pattern, data, rhs, cons)
+        y, info = solve_constrained(self.system, self.pattern, data, rhs, cons)
+        if self.contact.has_bodies:   # the same on every rank: the exchange is collective
+            dv = np.zeros((self.n_local, 3))
+            dv[: self.n_owned] = y
+            self.ghosts.update(dv)
+            info.reaction = constraint_impulses(self.pattern, data, rhs, dv)
+        return y, info
 
     def _update(self, result):
         n = self.n_owned
@@ -357,10 +364,10 @@ class Simulation:
         fatal) with the state unchanged."""
         state, pipe, contact = self.state, self.pipeline, self.contact
         target = pipe.run("kinematics")
-        missed, contacts = None, None
+        revision, contacts = None, None
         for _ in range(MAX_CONTACT_PASSES if contact.has_bodies else 1):
             if contact.has_bodies:
-                contacts = pipe.run("collision:bodies", state, h, missed)
+                contacts = pipe.run("collision:bodies", state, h, revision)
                 contact.begin_attempt(contacts, h)
             cons = pipe.run("constraints", target, contacts)
             error, solver_failure, result = None, False, None
@@ -376,18 +383,18 @@ class Simulation:
                 return None, agreed[1] + where, not solver_failure
             if not contact.has_bodies:
                 break
-            # a vertex the prediction missed that ends the step inside a body:
-            # solve the step again with it as a contact
-            missed = contact.missed_contacts(contacts, result.x, state.t + h, missed)
-            if missed is None:
+            # an adhesive contact, or a vertex the prediction missed that ends the
+            # step inside a body: solve the step again with the revised contacts
+            revision = contact.revise(contacts, result, state.t + h, h, revision)
+            if revision is None:
                 break
-        result.released, result.contact_report = None, None
+        result.contact_report = None
         if contact.has_response:
             error = None
             try:
                 response = pipe.run("collision:response", state, contacts, result, h)
                 result.x, result.v = response.x, response.v
-                result.released, result.contact_report = response.released, response.report
+                result.contact_report = response.report
             except Exception as exc:
                 error = f"{type(exc).__name__} in the collision response: {exc}"
             agreed = self.comm.agree(error)
@@ -403,17 +410,17 @@ class Simulation:
         if reason:
             state.restore(saved)
             return None, reason, False
-        self._commit(result, contacts, t_end)
+        self._commit(result, contacts, t_end, (state.v - saved.v) / h)
         return result, None, False
 
-    def _commit(self, result, contacts, t_end) -> None:
-        """The attempt's state becomes the state: time, multistep history, contact memory."""
+    def _commit(self, result, contacts, t_end, acceleration) -> None:
+        """The attempt's state becomes the state: time, multistep history,
+        contacts, the step's acceleration."""
         state = self.state
         state.t = t_end
         state.history = result.history
         state.contacts = contacts
-        if result.released is not None:
-            state.released = result.released
+        state.acceleration = acceleration
         if not result.newton_converged:
             if state.newton_unconverged == 0:
                 self.say(f"step {state.step}: Newton used all {result.newton_iterations} "

@@ -12,7 +12,7 @@ of other ranks' owned rows, refreshed by the ghost exchange).
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -34,10 +34,8 @@ class State:
     t: float = 0.0                       # s: time of the committed state
     step: int = 0                        # steps completed (or being taken)
     history: MultistepHistory | None = None
-    # contact memory: vertices whose contact pulled (adhesive normal impulse)
-    # in the last step are released for one step (Baraff and Witkin 1998 §5)
-    released: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     contacts: Any = None                 # the body contacts the last committed step used
+    acceleration: np.ndarray | None = None   # (n_local, 3) (v - v_before) / h of the last step
     # the energy guard's (E_ref, S) once the scene became passive
     energy_reference: tuple[float, float] | None = None
     rejections: int = 0                  # attempts undone so far (adaptive halving)
@@ -47,14 +45,14 @@ class State:
         """A copy to restore if the step is rejected (the history, contacts and
         energy reference are replaced, never changed in place: shared)."""
         saved = copy.copy(self)
-        saved.x, saved.v, saved.released = self.x.copy(), self.v.copy(), self.released.copy()
+        saved.x, saved.v = self.x.copy(), self.v.copy()
         return saved
 
     def restore(self, saved: "State") -> None:
         """Become ``saved`` again, keeping the array objects (other code holds them)."""
         self.x[...] = saved.x
         self.v[...] = saved.v
-        for name in ("t", "step", "history", "released", "contacts", "energy_reference",
+        for name in ("t", "step", "history", "contacts", "acceleration", "energy_reference",
                      "rejections", "newton_unconverged"):
             setattr(self, name, getattr(saved, name))
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from distcloth.collision.colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane,
-                                           RigidMotion, Sphere, load_mesh_collider,
-                                           rotvec_to_matrix)
+                                           RigidMotion, Sphere, load_collider_mesh,
+                                           load_mesh_collider, rotvec_to_matrix)
+from distcloth.collision.contact import rigid_motion as rigid_motion_of
 from distcloth.scene.meshio import read_mesh, write_obj
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -311,6 +312,80 @@ def test_load_mesh_collider(tmp_path):
     write_obj(str(flipped), v, tri[:, ::-1])
     with pytest.raises(ValueError, match=r"frame 2 .*flipped.obj.*different triangles"):
         load_mesh_collider([paths[0], paths[1], flipped], frame_times=[0.0, 1.0, 2.0])
+
+
+def collider_spec(tmp_path, paths, **keys):
+    """The checked ``colliders:`` entry of a mesh collider (through the scene schema)."""
+    from distcloth.config.load import config_from_dict
+    raw = {"cloth": [{"mesh": {"grid": {"size": [1, 1], "resolution": [2, 2]}}}],
+           "effects": ["gravity", "collisions"],
+           "colliders": [{"name": "body", "shape": "mesh",
+                          "file": [str(p) for p in paths] if len(paths) > 1 else str(paths[0]),
+                          **keys}]}
+    return config_from_dict(raw, str(tmp_path), "scene.yaml").colliders[0]
+
+
+def y_up_body():
+    """A lopsided y-up 'body': a box 0.4 wide (x), 1.7 tall (y), 0.3 deep (z),
+    its feet at y = 0, with a nose vertex sticking out along +z at head height."""
+    lo, hi = np.array([-0.2, 0.0, -0.15]), np.array([0.2, 1.7, 0.15])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
+    nose = np.array([[0.0, 1.6, 0.25]])
+    v = np.vstack([corners, nose])
+    tri = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                    [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 8], [5, 7, 8],
+                    [7, 3, 8], [3, 1, 8]])
+    return v, tri
+
+
+def test_y_up_mesh_is_turned_and_centred(tmp_path):
+    v, tri = y_up_body()
+    path = tmp_path / "body.obj"
+    write_obj(str(path), v, tri)
+    spec = collider_spec(tmp_path, [path], up_axis="y", center=[1.0, 2.0, 0.85])
+    x = load_collider_mesh(spec).vertices(0.0)
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    np.testing.assert_allclose(0.5 * (lo + hi), [1.0, 2.0, 0.85], atol=1e-12)
+    # the file's +y (height) is now +z, its +z (the nose's side) is -y, x unchanged
+    np.testing.assert_allclose(hi - lo, [0.4, 0.4, 1.7], atol=1e-12)
+    assert lo[2] == pytest.approx(0.0, abs=1e-12)       # feet on the floor
+    nose = x[8]      # file offset from corner 0: (0.2, 1.6, 0.4), turned to (x, -z, y)
+    np.testing.assert_allclose(nose - x[0], [0.2, -0.4, 1.6], atol=1e-12)
+    assert nose[1] == pytest.approx(lo[1]) and nose[2] == pytest.approx(lo[2] + 1.6)
+
+
+def test_mesh_placement_order_sequence_and_motion(tmp_path):
+    v, tri = y_up_body()
+    shift = np.array([0.0, 0.0, 0.1])                   # frame 1: the file body moved along its z
+    paths = [tmp_path / "f0.obj", tmp_path / "f1.obj"]
+    write_obj(str(paths[0]), v, tri)
+    write_obj(str(paths[1]), v + shift, tri)
+    keys = dict(up_axis="y", scale=2.0, rotation=[0.0, 0.0, 90.0], translation=[0.5, 0.0, 0.0],
+                frame_rate=10.0, motion={"times": [0.0, 1.0], "translations": [[0, 0, 0],
+                                                                               [0, 0, 1]]})
+    spec = collider_spec(tmp_path, paths, **keys)
+    mesh = load_collider_mesh(spec, rigid_motion_of(spec))
+    # by hand: turn (x, y, z) -> (x, -z, y), scale, rotate 90 degrees about z around
+    # frame 0's bounding-box centre, translate
+    turned = 2.0 * np.stack([v[:, 0], -v[:, 2], v[:, 1]], axis=1)
+    pivot = 0.5 * (turned.min(axis=0) + turned.max(axis=0))
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    expected = (turned - pivot) @ rz.T + pivot + [0.5, 0.0, 0.0]
+    np.testing.assert_allclose(mesh.frames[0], expected, atol=1e-12)
+    # the same transform for frame 1: its file shift along z turned to -y, doubled, turned to +x
+    np.testing.assert_allclose(mesh.frames[1] - mesh.frames[0],
+                               np.tile([0.2, 0.0, 0.0], (v.shape[0], 1)), atol=1e-12)
+    # the rigid motion moves the placed mesh
+    np.testing.assert_allclose(mesh.vertices(2.0), mesh.frames[1] + [0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_mesh_without_placement_is_read_bit_for_bit(tmp_path):
+    v, tri = y_up_body()
+    path = tmp_path / "body.obj"
+    write_obj(str(path), v * np.pi, tri)
+    read, _ = read_mesh(str(path))
+    assert np.array_equal(load_collider_mesh(collider_spec(tmp_path, [path])).frames[0], read)
 
 
 # ---------------------------------------------------------------- shipped body mesh

@@ -477,6 +477,56 @@ def test_bad_colliders_name_their_key_path(scene_dir, colliders, expected):
         "distcloth: config error: " + expected)
 
 
+MESH = {"name": "body", "shape": "mesh", "file": "m.obj"}
+
+
+def test_mesh_colliders_are_placed_with_defaults(scene_dir):
+    plain, placed, moved = config_from_dict(collider_scene(
+        MESH, {**MESH, "name": "a", "center": [0, 0, 1], "rotation": [0, 0, 90], "up_axis": "y",
+               "scale": 2},
+        {**MESH, "name": "b", "translation": [1, 2, 3]}), str(scene_dir), "s.yaml").colliders
+    assert (plain.up_axis, plain.rotation, plain.translation, plain.geometry) == \
+        ("z", (0.0, 0.0, 0.0), None, ())
+    assert (placed.up_axis, placed.rotation, dict(placed.geometry), placed.scale) == \
+        ("y", (0.0, 0.0, 90.0), {"center": (0.0, 0.0, 1.0)}, 2.0)
+    assert (moved.translation, moved.geometry) == ((1.0, 2.0, 3.0), ())
+    # the resolved text reads back to the same placement
+    cfg = config_from_dict(collider_scene(MESH, {**MESH, "name": "a", "center": [0, 0, 1],
+                                                 "rotation": [0, 0, 90], "up_axis": "y"},
+                                          {**MESH, "name": "b", "translation": [1, 2, 3]}),
+                           str(scene_dir), "s.yaml")
+    again = config_from_dict(yaml.safe_load(cfg.source_text), str(scene_dir), "s.yaml")
+    assert again.colliders == cfg.colliders
+
+
+MESH_PLACEMENT_ERRORS = [
+    ({**MESH, "center": [0, 0, 1], "translation": [1, 0, 0]},
+     "colliders.0.translation: [1, 0, 0] — not with center: center moves the bounding-box centre "
+     "to a point, translation moves the mesh by a vector; give one"),
+    ({**MESH, "up_axis": "x"}, "colliders.0.up_axis: 'x' — one of y | z"),
+    ({**MESH, "up_axis": "Y"}, "colliders.0.up_axis: 'Y' — one of y | z"),
+    ({**MESH, "rotation": [0, 90]}, "colliders.0.rotation: [0, 90] — a list of 3 numbers"),
+    ({**MESH, "rotation": [0, "a", 0]}, "colliders.0.rotation.1: 'a' — a finite number"),
+    ({**MESH, "translation": 1.0}, "colliders.0.translation: 1.0 — a list of 3 numbers"),
+    ({**MESH, "center": [0, 0]}, "colliders.0.center: [0, 0] — a list of 3 numbers"),
+    ({**SPHERE, "up_axis": "y"},
+     "colliders.0.up_axis: 'y' — not a key of a sphere; a sphere takes center, radius"),
+    ({**SPHERE, "rotation": [0, 0, 90]},
+     "colliders.0.rotation: [0, 0, 90] — not a key of a sphere; a sphere takes center, radius"),
+    ({"shape": "plane", "normal": [0, 0, 1], "offset": 0, "translation": [0, 0, 1]},
+     "colliders.0.translation: [0, 0, 1] — not a key of a plane; a plane takes normal, offset"),
+    ({"shape": "box", "center": [0, 0, 0], "half_extents": [1, 1, 1], "up_axis": "z"},
+     "colliders.0.up_axis: 'z' — not a key of a box; a box takes center, half_extents"),
+]
+
+
+@pytest.mark.parametrize("collider, expected", MESH_PLACEMENT_ERRORS,
+                         ids=[e[1].split(" — ")[0] + str(i)
+                              for i, e in enumerate(MESH_PLACEMENT_ERRORS)])
+def test_bad_mesh_placement_is_one_line(scene_dir, collider, expected):
+    assert error_line(collider_scene(collider), scene_dir) == "distcloth: config error: " + expected
+
+
 def test_cloth_thickness_must_not_be_negative(scene_dir):
     raw = set_path(base_scene(), "cloth.0.thickness", -0.001)
     assert error_line(raw, scene_dir) == ("distcloth: config error: cloth.0.thickness: -0.001"

@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from distcloth.io import CollectiveError, ResultWriter, check_xdmf, read_result, write_previews
+from distcloth.io import (CollectiveError, ResultWriter, check_xdmf, read_colliders, read_result,
+                          write_previews)
 from distcloth.io import h5writer
 from distcloth.parallel.comm import Comm
 
@@ -542,3 +543,121 @@ def test_preview_decimation_keeps_a_surface():
     area = 0.5 * np.abs(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])).sum()
     assert area > 0.9
     assert pick_frames(1) == [0] and pick_frames(10) == [0, 3, 6, 9] and pick_frames(0) == []
+
+
+# ---------------------------------------------------------------- colliders
+
+class FakeBody:
+    """A collider surface as the writer takes it (collision/surfaces.py makes
+    the real ones): a fixed triangle, moved along ``velocity`` if given."""
+
+    def __init__(self, name, velocity=None):
+        self.name, self.shape = name, "mesh"
+        self.triangles = np.array([[0, 1, 2]], dtype=np.int64)
+        self.rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        self.velocity = velocity
+        self.moving = velocity is not None
+
+    def vertices(self, t):
+        return self.rest if self.velocity is None else self.rest + t * np.asarray(self.velocity)
+
+
+def scene_colliders():
+    """A sphere sliding 1 m/s along x and a static floor, as run.py builds them
+    (the same on every rank), and a body whose name is not a group name."""
+    from distcloth.collision.colliders import AnalyticCollider, Plane, RigidMotion, Sphere
+    from distcloth.collision.contact import Collider
+    from distcloth.collision.surfaces import collider_surfaces
+
+    def collider(name, shape, motion=None):
+        return Collider(name=name, kind="analytic", query=None, friction=0.0, thickness=0.0,
+                        law="", body=AnalyticCollider(shape, motion))
+
+    slide = RigidMotion([0.0, 1.0], [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    colliders = [collider("ball", Sphere((0.0, 0.0, 0.25), 0.25), slide),
+                 collider("floor", Plane((0.0, 0.0, 1.0), 0.0))]
+    rest = np.array([[-0.5, -0.5, 0.6], [0.5, 0.5, 0.6]])
+    return colliders, collider_surfaces(colliders, rest) + [FakeBody("arm/left")]
+
+
+def test_colliders_are_written_read_and_drawn(shared_dir):
+    from distcloth.collision.surfaces import collider_surface
+    syn = Synthetic(frames=3)
+    colliders, surfaces = scene_colliders()
+    path = os.path.join(shared_dir, "bodies.h5")
+    with syn.writer(path, colliders=surfaces) as w:
+        syn.write_run(w)
+    bare = os.path.join(shared_dir, "bare.h5")
+    with syn.writer(bare) as w:
+        syn.write_run(w, frames=1)
+
+    def check():
+        with h5py.File(path, "r") as f:
+            assert f.attrs["format_version"] == 2
+            assert sorted(f["colliders"]) == ["arm_left", "ball", "floor"]
+            ball, floor = f["colliders/ball"], f["colliders/floor"]
+            assert (ball.attrs["shape"], bool(ball.attrs["moving"])) == ("sphere", True)
+            assert (floor.attrs["shape"], bool(floor.attrs["moving"])) == ("plane", False)
+            assert f["colliders/arm_left"].attrs["name"] == "arm/left"
+            assert ball["positions"].shape == (3, ball["positions"].shape[1], 3)
+            assert floor["positions"].shape == (1, 4, 3) and floor["triangles"].dtype == np.int64
+            # the sphere where it was at each frame's time
+            for k in (0, 2):
+                x, tri = collider_surface(colliders[0], syn.frame_time[k], np.zeros((2, 3)))
+                assert np.array_equal(ball["positions"][k], x)
+                assert np.array_equal(ball["triangles"][...], tri)
+            moved = ball["positions"][2].mean(axis=0) - ball["positions"][0].mean(axis=0)
+            np.testing.assert_allclose(moved, [syn.frame_time[2] - syn.frame_time[0], 0, 0],
+                                       atol=1e-12)
+            # the floor's square: on the plane, centred under the cloth, twice its size
+            square = floor["positions"][0]
+            np.testing.assert_allclose([square.min(axis=0), square.max(axis=0)],
+                                       [[-1, -1, 0], [1, 1, 0]], atol=1e-12)
+        r = read_result(path, frames=[0, 2])
+        assert sorted(r["colliders"]) == ["arm/left", "ball", "floor"]
+        ball = r["colliders"]["ball"]
+        assert ball["moving"] and ball["shape"] == "sphere" and ball["positions"].shape[0] == 2
+        assert r["colliders"]["floor"]["positions"].shape == (1, 4, 3)
+        one = read_colliders(path, frames=[1])["ball"]["positions"]
+        np.testing.assert_array_equal(one[0], collider_surface(colliders[0], syn.frame_time[1],
+                                                               np.zeros((2, 3)))[0])
+        # ParaView: the cloth and one temporal collection per collider
+        sidecar = os.path.splitext(path)[0] + ".xdmf"
+        assert check_xdmf(sidecar) == []
+        series = ET.parse(sidecar).getroot().findall("Domain/Grid")
+        assert [g.get("Name") for g in series] == ["cloth", "collider ball", "collider floor",
+                                                   "collider arm/left"]
+        assert all(len(g.findall("Grid")) == 3 for g in series)
+        # a scene without colliders has no /colliders group
+        with h5py.File(bare, "r") as f:
+            assert "colliders" not in f
+        assert check_xdmf(os.path.splitext(bare)[0] + ".xdmf") == []
+        assert read_result(bare)["colliders"] == {}
+        out = write_previews(path)
+        frames_png = [p for p in out if p.endswith("_frames.png")][0]
+        with open(frames_png, "rb") as fh:
+            assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+        assert os.path.getsize(frames_png) > 10_000
+
+    on_root(check)
+
+
+def test_preview_draws_the_colliders(tmp_path):
+    """The frame picture with a collider differs from the one without, and a
+    huge collider mesh is decimated to the budget."""
+    from distcloth.io.preview import _bodies, _frames_png
+    nu = 60
+    i, j = np.meshgrid(np.arange(nu), np.arange(nu))
+    grid = np.c_[i.ravel(), j.ravel(), np.zeros(nu * nu)] / (nu - 1)
+    idx = np.arange(nu * nu).reshape(nu, nu)
+    a, b, c, d = (x.ravel() for x in (idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]))
+    tri = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]])
+    res = {"positions": (grid + [0, 0, 1.0])[None], "time": np.zeros(1), "triangles": tri[:50],
+           "rest_positions": grid, "attrs": {"scene": "t"}, "frames_written": 1}
+    big = {"triangles": tri, "positions": grid[None], "moving": False, "shape": "mesh"}
+    bodies, decimated = _bodies({"big": big}, 1000)
+    assert decimated == 1 and bodies[0]["triangles"].shape[0] <= 1000
+    without, with_body = str(tmp_path / "without.png"), str(tmp_path / "with.png")
+    _frames_png(res, [0], without, 30000)
+    _frames_png({**res, "colliders": {"big": big}}, [0], with_body, 30000)
+    assert open(without, "rb").read() != open(with_body, "rb").read()

@@ -207,3 +207,48 @@ def test_mesh_sphere_by_bvh_and_image_space(shared_tmp, comm, method):
         worst = min(worst, float(r[held].min() - R))
     assert contacts > 10
     assert worst >= 0.9 * d - sagitta - pixel * np.tan(np.radians(60)), (worst, sagitta, pixel)
+
+
+def _box_obj(lo, hi) -> str:
+    """A closed box with outward triangles, as OBJ text."""
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])], dtype=float)
+    tri = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                    [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    a, b, c = (corners[tri[:, i]] for i in range(3))
+    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a - corners.mean(axis=0)) < 0
+    tri[inward] = tri[inward][:, ::-1]
+    return ("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in corners)
+            + "".join(f"f {i + 1} {j + 1} {k + 1}\n" for i, j, k in tri))
+
+
+def test_cloth_lands_on_a_placed_y_up_box(shared_tmp, comm):
+    # a 0.4 x 0.4 x 0.2 m box written y-up and far from the origin (x 3..3.4,
+    # height y 5..5.2, z -1..-0.6); up_axis: y and center put it on the
+    # floor under the cloth, its top at z = 0.2: the cloth must stop there
+    d = 0.002
+    path = shared_tmp / "box_y_up.obj"
+    if comm.Get_rank() == 0:
+        path.write_text(_box_obj([3.0, 5.0, -1.0], [3.4, 5.2, -0.6]))
+    comm.Barrier()
+    raw = grid_scene(
+        cloth=[{"name": "sq", "mesh": {"grid": {"size": [0.3, 0.3], "resolution": [9, 9]},
+                                       "center": [0.0, 0.0, 0.25]},
+                "material": {"model": "fem", "density": 0.1, "stretch": 50.0, "bending": 1e-5},
+                "thickness": d}],
+        effects=["gravity", "membrane", "bending", "collisions"],
+        colliders=[{"name": "box", "shape": "mesh", "file": str(path), "up_axis": "y",
+                    "center": [0.0, 0.0, 0.1], "friction": 0.3}],
+        time={"end": 1.0, "step": 0.005})
+    sim = make_sim(raw)
+    body = sim.contact.colliders[0].body.vertices(0.0)
+    np.testing.assert_allclose([body.min(axis=0), body.max(axis=0)],
+                               [[-0.2, -0.2, 0.0], [0.2, 0.2, 0.2]], atol=1e-12)
+    contacts = 0
+    for _ in range(80):                          # 0.4 s: falls 5 cm in 0.1 s, then rests
+        contacts = max(contacts, sim.step()["contacts"])
+    x = gather_positions(sim)
+    assert contacts > 0
+    # on the top face, not through it and not still falling (free fall: z < -0.5)
+    assert x[:, 2].min() > 0.2 + 0.5 * d and x[:, 2].max() < 0.2 + 5 * d, (x[:, 2].min(),
+                                                                           x[:, 2].max())

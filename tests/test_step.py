@@ -60,19 +60,16 @@ def test_stage_declarations_are_complete():
 def test_snapshot_restores_every_field():
     x, v = np.arange(12.0).reshape(4, 3), np.ones((4, 3))
     s = State(x=x, v=v, t=0.5, step=3, history=MultistepHistory(x.copy(), v.copy(), 0.1),
-              released=np.array([True, False, False, True]), energy_reference=(1.0, 2.0),
-              rejections=1, newton_unconverged=2)
+              energy_reference=(1.0, 2.0), rejections=1, newton_unconverged=2)
     saved = s.snapshot()
     s.x += 1.0
     s.v[:] = -5.0
-    s.released[:] = False
     s.t, s.step, s.history, s.contacts = 0.6, 4, None, "contacts"
     s.energy_reference, s.rejections, s.newton_unconverged = None, 7, 9
     s.restore(saved)
     assert s.x is x and s.v is v                     # the same arrays, others hold them
     np.testing.assert_array_equal(s.x, np.arange(12.0).reshape(4, 3))
     np.testing.assert_array_equal(s.v, np.ones((4, 3)))
-    np.testing.assert_array_equal(s.released, [True, False, False, True])
     assert (s.t, s.step, s.contacts, s.energy_reference, s.rejections,
             s.newton_unconverged) == (0.5, 3, None, (1.0, 2.0), 1, 2)
     assert s.history.h == 0.1

@@ -26,6 +26,7 @@ from typing import Sequence
 import numpy as np
 
 from ..scene.meshio import read_mesh
+from ..scene.placement import Y_UP_TO_Z_UP, place_frames
 
 __all__ = [
     "RigidMotion", "Plane", "Sphere", "Capsule", "Box", "AnalyticCollider",
@@ -444,9 +445,20 @@ def load_mesh_collider(paths, frame_times=None, frame_rate: float | None = None,
 
 def load_collider_mesh(spec, motion: RigidMotion | None = None) -> MeshCollider:
     """The mesh collider a scene's ``colliders:`` entry describes (``shape: mesh``):
-    its file or frame sequence, scaled, with the entry's rigid ``motion``."""
+    its file or frame sequence, placed, with the entry's rigid ``motion`` on top.
+
+    The placement is one transform for every frame, in this order: a y-up file
+    (``up_axis: y``) is turned so its +y becomes +z, then scaled, rotated about
+    frame 0's bounding-box centre, and moved so that centre lands on ``center``
+    or by ``translation`` (scene/placement.py, as for cloth pieces).  The
+    motion's body coordinates are these placed coordinates."""
     mesh = load_mesh_collider(list(spec.files), frame_rate=spec.frame_rate, motion=motion,
                               friction=spec.friction, thickness=spec.thickness)
+    frames = mesh.frames
+    if spec.up_axis == "y":
+        frames = frames @ Y_UP_TO_Z_UP.T
     if spec.scale != 1.0:
-        mesh.frames *= spec.scale
+        frames = frames * spec.scale
+    mesh.frames = place_frames(frames, spec.rotation, center=dict(spec.geometry).get("center"),
+                               translation=spec.translation)
     return mesh

@@ -56,8 +56,13 @@ from .impulses import ReusedCandidates, resolve
 from .mesh_query import MeshProximity
 from .response import Contacts, contact_constraint, detect, friction, normal_impulse, project
 
-MAX_CONTACT_PASSES = 3   # solves per attempt at most when contacts were missed
+MAX_CONTACT_PASSES = 4   # solves per attempt at most while the contact set changes
 MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
+BAND_FRACTION = 0.5      # a contact of the last step predicted to end within this fraction of
+                         # d above d is kept, at its free-flight approach (response.detect):
+                         # contact sets persist, so the first solve of a step is usually right
+ADHESION_TOLERANCE = 1e-3   # a contact is adhesive when its constraint pulls by more than this
+                            # fraction of the vertex's weight impulse m g h
 CANDIDATE_SLACK = 0.5    # the CCD passes of a step reuse their candidates while no end position
                          # moved more than this fraction of the thickness (impulses.ReusedCandidates)
 
@@ -137,23 +142,33 @@ def plane_quad(spec, rest_positions) -> MeshCollider:
 
 
 @dataclass
+class ContactRevision:
+    """What an attempt's solves showed about its contacts (local rows)."""
+    released: np.ndarray        # (n_local,) bool: adhesive, not a contact for the rest of the attempt
+    missed: np.ndarray          # (k, n_local) bool: contacts that land at d whatever the prediction
+
+
+@dataclass
 class ContactReport:
-    """What one attempt's contact response measured (this rank's part)."""
+    """What one attempt's contact response measured (this rank's part); the
+    works are in J, over the step, relative to the bodies' motion."""
     contacts: int = 0
     max_penetration: float = -np.inf
     projected_vertices: int = 0
     impulse_hits: float = 0.0
     impact_zone_vertices: float = 0.0
     self_intersections: float = 0.0
+    contact_work: float = 0.0        # the contact constraints of the solve
+    friction_work: float = 0.0       # friction, in the solve or after it
+    failsafe_work: float = 0.0       # the position fail-safe (kinetic + gravitational)
+    impulse_work: float = 0.0        # the triangle pipeline (kinetic + gravitational)
 
 
 @dataclass
 class ContactResponse:
-    """The response stage's result: the corrected proposal and the contact
-    memory the step hands on if it is committed."""
+    """The response stage's result: the corrected proposal and what it measured."""
     x: np.ndarray
     v: np.ndarray
-    released: np.ndarray | None       # (n_local,) bool, or None without body contacts
     report: ContactReport = field(default_factory=ContactReport)
 
 
@@ -175,7 +190,8 @@ class ContactModel:
         self.thickness = float(thick.max(initial=0.0))     # the triangle pipeline's contact distance
         self.never_contact = np.zeros(self.n_local, dtype=bool)   # pins keep their constraint
         self.never_contact[held] = True
-        self.gravity_norm = float(np.linalg.norm(cfg.gravity)) if cfg.has("gravity") else 0.0
+        self.gravity = np.asarray(cfg.gravity if cfg.has("gravity") else (0.0, 0.0, 0.0), float)
+        self.gravity_norm = float(np.linalg.norm(self.gravity))
         # friction as a force of the solve: the colliders whose law says so
         self.in_solve = np.array([c.law == IN_SOLVE for c in self.colliders] + [False], dtype=bool)
         self.friction_term = None
@@ -232,22 +248,30 @@ class ContactModel:
         return phis, normals, vels, offsets
 
     # --------------------------------------------------- 2. detection
-    def detect(self, state, h: float, missed=None) -> Contacts:
+    def detect(self, state, h: float, revision: ContactRevision | None = None) -> Contacts:
         """The contact set of the attempt on every local vertex (owned and
-        ghosts). ``missed`` (k, n_local) bool: contacts an earlier pass of the
-        attempt missed (they join whatever their prediction says)."""
+        ghosts), by the unilateral rule of response.py; ``revision``: what the
+        attempt's earlier solves showed (contacts released as adhesive,
+        contacts missed)."""
         x, v = state.x, state.v
+        forced = revision.missed if revision is not None else None
+        exclude = self.never_contact
+        if revision is not None:
+            exclude = exclude | revision.released
         speed = float(np.sqrt(np.max(np.einsum("ij,ij->i", v, v), initial=0.0)))
-        reach = self.d_max + h * speed + h * h * self.gravity_norm    # how far a vertex can get this step
-        phis, normals, vels, offsets = self.query(x, state.t, np.inf if missed is not None else reach)
-        margin = offsets + h * h * self.gravity_norm
-        penetrating = np.any(phis < offsets, axis=0)
-        exclude = self.never_contact | (state.released & ~penetrating)
-        if missed is not None:
-            exclude = exclude & ~missed.any(axis=0)
-            margin = np.where(missed, np.inf, margin)
+        # how far a vertex can be from a body and still touch it this step
+        reach = (1.0 + BAND_FRACTION) * self.d_max + h * speed + h * h * self.gravity_norm
+        phis, normals, vels, offsets = self.query(x, state.t, np.inf if forced is not None else reach)
         frictions = np.array([c.friction for c in self.colliders])
-        return detect(phis, normals, vels, v, offsets, frictions, h, margin, exclude)
+        persistent = np.zeros(phis.shape, dtype=bool)
+        last = state.contacts
+        if last is not None and last.index.size:
+            persistent[last.collider, last.index] = True
+        # free flight continues the last step's acceleration (tension and support
+        # included); before any step, gravity's
+        accel = self.gravity if state.acceleration is None else state.acceleration
+        return detect(phis, normals, vels, v, offsets, frictions, h, accel,
+                      BAND_FRACTION * offsets, exclude, persistent, forced)
 
     # ------------------------------------------------- 3. constraints
     @staticmethod
@@ -263,62 +287,103 @@ class ContactModel:
                 else np.zeros(0, dtype=bool)
             self.friction_term.begin_step(contacts, h, use)
 
-    # ------------------------------------------------- 5. missed contacts
-    def missed_contacts(self, contacts: Contacts, x_end, t_end: float, missed):
-        """(k, n_local) bool of free vertices ending deeper than MISSED_FRACTION d
-        inside a collider without a contact constraint (accumulated over the
-        passes), or None if there is none on any rank."""
+    # ----------------------------------- 5. adhesive and missed contacts
+    def revise(self, contacts: Contacts, result, t_end: float, h: float,
+               revision: ContactRevision | None):
+        """After a solve: contacts whose constraint pulled the vertex toward the
+        body (a negative normal impulse beyond ADHESION_TOLERANCE of its weight
+        impulse) are released, and free vertices that end deeper than
+        MISSED_FRACTION d inside a body become contacts that land at d.
+        Returns the revision (accumulated over the attempt's solves) if the
+        contact set changes on any rank, else None."""
         n, k = self.n_owned, len(self.colliders)
-        phis, _, _, offsets = self.query(x_end, t_end, self.d_max)
+        flags = np.zeros((self.n_local, 1 + k))
+        mine = contacts.index < n
+        idx = contacts.index[mine]
+        if result.reaction is not None and idx.size:
+            impulse = np.einsum("ni,ni->n", result.reaction[idx], contacts.normal[mine])
+            scale = self.mass[idx] * h * max(self.gravity_norm, 1.0)
+            flags[idx[impulse < -ADHESION_TOLERANCE * scale], 0] = 1.0
+        phis, _, _, offsets = self.query(result.x, t_end, self.d_max)
         free = ~self.never_contact[:n]
-        free[contacts.index[contacts.index < n]] = False
-        deep = (offsets - phis > MISSED_FRACTION * offsets) & free[None]
-        if self.comm.max(np.array([float(deep.any())]))[0] == 0.0:
+        free[idx] = False
+        flags[:n, 1:] = ((offsets - phis > MISSED_FRACTION * offsets) & free[None]).T
+        if self.comm.max(np.array([float(flags.any())]))[0] == 0.0:
             return None
-        flags = np.zeros((self.n_local, k))
-        flags[:n] = deep.T
         self.ghosts.update(flags)
-        new = flags.T > 0.5
-        return new if missed is None else (new | missed)
+        released, missed = flags[:, 0] > 0.5, flags[:, 1:].T > 0.5
+        if revision is not None:
+            released |= revision.released
+            missed |= revision.missed
+        # a vertex pushed deep inside after its release lands at d after all
+        return ContactRevision(released & ~missed.any(axis=0), missed)
 
     # ------------------------------------------------------- 6. response
     def respond(self, state, contacts: Contacts | None, result, h: float) -> ContactResponse:
-        """After the solve: friction of the after-step laws on the contacts,
-        adhesive contacts marked for release, the position fail-safe, the
-        triangle pipeline.  ``result``: the integrator's StepResult (proposed
-        owned rows, start forces, position gain)."""
+        """After the solve: friction of the after-step laws on the contacts, the
+        position fail-safe, the triangle pipeline; and the work each of them
+        (and the contact constraints in the solve) did.  ``result``: the
+        integrator's StepResult (proposed owned rows, start forces, position
+        gain, constraint impulses)."""
         n = self.n_owned
         x_new, v_new = result.x.copy(), result.v.copy()
         gain = result.position_gain
         report = ContactReport()
-        released = None
         if contacts is not None:
-            flags = np.zeros((self.n_local, 1))
             mine = contacts.index < n
             idx = contacts.index[mine]
             report.contacts = int(idx.size)
             if idx.size:
                 normal = contacts.normal[mine]
+                u = contacts.velocity[mine]
                 v_free = state.v[idx] + h * result.start_forces[idx] / self.mass[idx, None]
                 dvn = normal_impulse(v_new[idx], v_free, normal)
-                flags[idx[dvn < 0.0], 0] = 1.0
+                # the constraints' impulses: from the solve, or (explicit schemes)
+                # the normal velocity change they made
+                impulse = (np.einsum("ni,ni->n", result.reaction[idx], normal)
+                           if result.reaction is not None else self.mass[idx] * dvn)
+                moved = np.einsum("ni,ni->n", x_new[idx] - state.x[idx] - h * u, normal)
+                report.contact_work = float(np.sum(impulse * moved) / h)
+                report.friction_work = self._solve_friction_work(state.x, x_new, v_new, h)
                 v_after = self._after_step_friction(v_new[idx], contacts, mine, dvn)
+                report.friction_work += _kinetic_change(self.mass[idx], v_new[idx] - u, v_after - u)
                 x_new[idx] += gain * (v_after - v_new[idx])
                 v_new[idx] = v_after
-            self.ghosts.update(flags)
-            released = flags[:, 0] > 0.5
         # the fail-safe before the triangle pipeline: its projection is then
         # part of the motion the CCD checks, so lifting a layer out of a body
         # cannot carry it through the layer above
         t_end = state.t + h
         if self.colliders:
+            x0, v0 = x_new.copy(), v_new.copy()
             x_new, v_new, report.max_penetration, report.projected_vertices = \
                 self._failsafe(x_new, v_new, t_end)
+            report.failsafe_work = self._work_of_change(x0, v0, x_new, v_new)
         if self.detector is not None:
+            x0, v0 = x_new, v_new
             x_new, v_new = self._triangle_contact(state, x_new, v_new, h, gain, report)
+            report.impulse_work = self._work_of_change(x0, v0, x_new, v_new)
             if self.self_collision:
                 report.self_intersections = float(self._count_crossings(x_new, t_end))
-        return ContactResponse(x_new, v_new, released, report)
+        return ContactResponse(x_new, v_new, report)
+
+    def _solve_friction_work(self, x0, x1, v1, h) -> float:
+        """Work of the friction force of the solve over the step, relative to the body."""
+        term = self.friction_term
+        if term is None or term.index.size == 0 or term.c is None:
+            return 0.0
+        f = term.force_at(v1[term.index])
+        return float(np.sum(f * (x1[term.index] - x0[term.index] - h * term.u)))
+
+    def _work_of_change(self, x0, v0, x1, v1) -> float:
+        """Kinetic plus gravitational energy a post-solve correction added to this
+        rank's rows (elastic energy it changed is not counted)."""
+        m = self.mass[: self.n_owned]
+        changed = np.any((x1 != x0) | (v1 != v0), axis=1)
+        if not changed.any():
+            return 0.0
+        m = m[changed]
+        return (_kinetic_change(m, v0[changed], v1[changed])
+                - float(np.sum(m * ((x1[changed] - x0[changed]) @ self.gravity))))
 
     def _after_step_friction(self, v, contacts: Contacts, mine, dvn):
         """The velocities of this rank's contacts after the after-step laws."""
@@ -399,12 +464,16 @@ class ContactModel:
         out = {}
         if self.colliders:
             sums = self.comm.sum(np.array([float(report.contacts),
-                                           float(report.projected_vertices)]))
+                                           float(report.projected_vertices),
+                                           report.contact_work, report.friction_work,
+                                           report.failsafe_work]))
             pen = self.comm.max(np.array([float(report.max_penetration)]))[0]
-            out.update(contacts=sums[0], max_penetration=pen, projected_vertices=sums[1])
+            out.update(contacts=sums[0], max_penetration=pen, projected_vertices=sums[1],
+                       contact_work=sums[2], friction_work=sums[3], failsafe_work=sums[4])
         if self.detector is not None:     # replicated values: the same on every rank
             out["impulse_hits"] = report.impulse_hits
             out["impact_zone_vertices"] = report.impact_zone_vertices
+            out["impulse_work"] = float(self.comm.sum(np.array([report.impulse_work]))[0])
             if self.self_collision:
                 out["self_intersections"] = report.self_intersections
             out.update(self._traversal_diagnostics())
@@ -442,3 +511,8 @@ class ContactModel:
                     traverse_idle_mean=sm[1] / p, traverse_tests=sm[2], tasks_created=sm[3],
                     tasks_stolen=sm[4], steals_refused=sm[5], steal_messages=sm[6],
                     steal_latency_max=mx[2])
+
+
+def _kinetic_change(m, v0, v1) -> float:
+    """Sum of 1/2 m (|v1|^2 - |v0|^2)."""
+    return 0.5 * float(np.sum(m * (np.einsum("ij,ij->i", v1, v1) - np.einsum("ij,ij->i", v0, v0))))

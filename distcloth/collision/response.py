@@ -78,20 +78,32 @@ class Contacts:
                         np.zeros((0, 3)), z, z.copy(), z.copy(), z.copy())
 
 
-def detect(phis, normals, velocities, v, offsets, frictions, h, margin, exclude) -> Contacts:
-    """Contacts of the vertices against every collider.
+def detect(phis, normals, velocities, v, offsets, frictions, h, accel, band, exclude,
+           persistent=None, forced=None) -> Contacts:
+    """Contacts of the vertices against every collider (the rule: module docstring).
 
     ``phis`` (k, n), ``normals`` and ``velocities`` (k, n, 3): the colliders'
     answers for the n vertices at the start of the step; ``v`` (n, 3) the
     cloth velocities; ``offsets`` (k, n) d per collider and vertex;
-    ``frictions`` (k,); ``margin`` (k, n) or scalar; ``exclude`` (n,) bool:
-    vertices that never get a contact constraint (pins, released)."""
+    ``frictions`` (k,); ``accel`` (n, 3) or (3,): the acceleration of free flight;
+    ``exclude`` (n,) bool: vertices that never get a contact (pins, contacts
+    released in this attempt); ``persistent`` (k, n) bool: the contacts of the
+    last step, kept (without pulling) while their predicted end stays within
+    ``band`` (k, n) above d; ``forced`` (k, n) bool: contacts an earlier solve
+    of the attempt missed, which land at d whatever the prediction."""
     k, n = phis.shape
     if k == 0 or n == 0:
         return Contacts.none()
     vrel_n = np.einsum("kni,kni->kn", v[None] - velocities, normals)
-    predicted = phis + h * np.minimum(vrel_n, 0.0)
-    touching = (predicted < offsets + margin) & ~exclude[None]
+    # the normal velocity relative to the body at the end of a step of free flight
+    accel = np.broadcast_to(np.asarray(accel, dtype=np.float64), v.shape)
+    v_free = vrel_n + h * np.einsum("kni,ni->kn", normals, accel)
+    predicted = phis + h * v_free
+    landing = predicted < offsets
+    if forced is not None:
+        landing = landing | forced
+    kept = (predicted < offsets + band) & persistent if persistent is not None else False
+    touching = (landing | kept) & ~exclude[None]
     # deepest collider per vertex: smallest phi - d among those touching
     depth = np.where(touching, phis - offsets, np.inf)
     best = np.argmin(depth, axis=0)                      # ties: lowest collider index
@@ -102,7 +114,9 @@ def detect(phis, normals, velocities, v, offsets, frictions, h, margin, exclude)
     vb = velocities[c, idx]
     phi = phis[c, idx]
     d = offsets[c, idx]
-    target = np.einsum("ni,ni->n", vb, normal) + (d - phi) / h
+    # land exactly at d, or (a kept contact) keep at most the free-flight approach
+    relative = np.where(landing[c, idx], (d - phi) / h, np.minimum(v_free[c, idx], 0.0))
+    target = np.einsum("ni,ni->n", vb, normal) + relative
     return Contacts(idx.astype(np.int64), c.astype(np.int64), normal, vb, phi, d,
                     np.asarray(frictions, dtype=np.float64)[c], target)
 

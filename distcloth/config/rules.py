@@ -10,8 +10,9 @@ from typing import Any
 from .checks import join
 from .describe import entries, entry, needs
 from .fabrics import FABRICS
-from .schema import (FEM_ONLY, MESH_ONLY, SHAPE_KEYS, ColliderGeometry, ColliderSpec, ConfigError,
-                     MaterialSpec, MotionSpec, PinSpec, SceneConfig, TimeSpec)
+from .schema import (FEM_ONLY, MESH_ONLY, OPTIONAL_SHAPE_KEYS, SHAPE_KEYS, ColliderGeometry,
+                     ColliderSpec, ConfigError, MaterialSpec, MotionSpec, PinSpec, SceneConfig,
+                     TimeSpec)
 from .walk import Context, Rules, read_field, required_text
 
 PER_TIME = ("translations", "rotations")     # MotionSpec keys with one entry per time
@@ -86,8 +87,8 @@ def _collider_keys(section: dict, key: str, ctx: Context) -> dict:
     other shape's key is refused before the values are read."""
     shape = read_field(ColliderSpec, "shape", section, key, ctx)
     mesh_keys = tuple(e.key for e in entries(ColliderSpec) if needs(ColliderSpec, e, MESH_ONLY))
-    takes = SHAPE_KEYS[shape] + (tuple(k for k in mesh_keys if k not in SHAPE_KEYS[shape])
-                                 if shape == "mesh" else ())
+    own = SHAPE_KEYS[shape] + OPTIONAL_SHAPE_KEYS.get(shape, ())
+    takes = own + (tuple(k for k in mesh_keys if k not in own) if shape == "mesh" else ())
     for other in tuple(e.key for e in entries(ColliderGeometry)) + mesh_keys:
         if other not in takes and section.get(other) is not None:
             raise ConfigError(join(key, other), section[other],
@@ -96,14 +97,20 @@ def _collider_keys(section: dict, key: str, ctx: Context) -> dict:
 
 
 def _collider(spec: ColliderSpec, section: dict, key: str, ctx: Context) -> ColliderSpec:
-    """Every key of the shape given; a mesh sequence needs its frame rate."""
+    """Every required key of the shape given; a mesh sequence needs its frame
+    rate; a mesh is moved by center or by translation, not both."""
     for name in SHAPE_KEYS[spec.shape]:
         if section.get(name) is None:
             e = next(e for t in (ColliderGeometry, ColliderSpec) for e in entries(t)
                      if e.key == name)
             raise ConfigError(join(key, name), None, required_text(e))
     given = dict(spec.geometry)
-    geometry = tuple((name, given[name]) for name in SHAPE_KEYS[spec.shape] if name in given)
+    own = SHAPE_KEYS[spec.shape] + OPTIONAL_SHAPE_KEYS.get(spec.shape, ())
+    geometry = tuple((name, given[name]) for name in own if name in given)
+    if spec.translation is not None and "center" in given:
+        raise ConfigError(join(key, "translation"), section["translation"],
+                          "not with center: center moves the bounding-box centre to a point, "
+                          "translation moves the mesh by a vector; give one")
     if len(spec.files) > 1 and spec.frame_rate is None:
         raise ConfigError(join(key, "frame_rate"), None,
                           "frames per second (> 0): needed with a list of files")

@@ -17,10 +17,13 @@ EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions", "s
 COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box", "mesh")
 COLLIDER_METHODS = ("bvh", "image")   # mesh colliders: BVH closest points or image-space maps
 IMAGE_AXES = ("x", "y", "z")
+UP_AXES = ("y", "z")                   # a mesh collider file's up axis
 # the geometry keys of each collider shape (all required)
 SHAPE_KEYS = {"plane": ("normal", "offset"), "sphere": ("center", "radius"),
               "capsule": ("a", "b", "radius"), "box": ("center", "half_extents"),
               "mesh": ("file",)}
+# geometry keys a shape may leave out: a mesh's center places it
+OPTIONAL_SHAPE_KEYS = {"mesh": ("center",)}
 INTEGRATORS = ("backward_euler", "bdf2", "implicit_midpoint", "newmark",
                "symplectic_euler", "explicit_midpoint", "rk4")
 GRID_PATTERNS = ("regular", "alternating")
@@ -216,14 +219,15 @@ class MotionSpec:
 
 @dataclass(frozen=True)
 class ColliderGeometry:
-    """The geometry keys of the analytic shapes, written in the collider's own
-    mapping; each shape takes exactly its own (SHAPE_KEYS)."""
+    """The geometry keys of the shapes, written in the collider's own mapping;
+    each shape takes exactly its own (SHAPE_KEYS, and a mesh its optional center)."""
     normal: Vec3 | None = setting(None, doc="plane: normal (normalised on use); normal · y < "
                                   "offset is inside", nonzero=True, what="[x, y, z], non-zero")
     offset: float | None = setting(None, doc="plane: normal · y = offset on the plane",
                                    unit="m", what="a number in m (normal . y = offset)")
-    center: Vec3 | None = setting(None, doc="sphere, box: centre", unit="m",
-                                  what="[x, y, z] in m")
+    center: Vec3 | None = setting(None, doc="sphere, box: centre; mesh (optional): where the "
+                                  "bounding-box centre of the placed mesh (its first frame) "
+                                  "goes, as for cloth pieces", unit="m", what="[x, y, z] in m")
     radius: float | None = setting(None, doc="sphere, capsule: radius", unit="m", above=0,
                                    what="a number > 0 in m")
     a: Vec3 | None = setting(None, doc="capsule: one end of the segment", unit="m",
@@ -238,11 +242,14 @@ class ColliderGeometry:
 class ColliderSpec:
     """A rigid or deforming body the cloth collides with (collisions effect):
     checked even without the effect, used only with it. Contact when the
-    distance phi < d = the cloth's thickness + the collider's."""
+    distance phi < d = the cloth's thickness + the collider's. A mesh is placed
+    like a cloth piece, one transform for every frame, in this order: turned
+    z-up (up_axis), scaled, rotated about its bounding-box centre (of its first
+    frame), then moved by center or translation; motion moves the placed mesh."""
     name: str = setting(doc="unique among the colliders", auto="collider{index}")
     shape: str = choice(MISSING, COLLIDER_SHAPES, doc="the body: each shape takes the geometry "
-                        "keys that name it below (all required) and no others; mesh also "
-                        "takes the keys marked 'only with shape: mesh'")
+                        "keys that name it below (all required but a mesh's center) and no "
+                        "others; mesh also takes the keys marked 'only with shape: mesh'")
     geometry: tuple[tuple[str, Any], ...] = setting(doc="the shape's keys and values",
                                                     inline=ColliderGeometry)
     friction: float = setting(0.0, doc="Coulomb coefficient mu (0: frictionless)", at_least=0)
@@ -259,6 +266,15 @@ class ColliderSpec:
                                        "(needed with a list of files, refused with one)", unit="1/s", above=0,
                                        only=MESH_ONLY)
     scale: float = setting(1.0, doc="mesh: scale factor", above=0, only=MESH_ONLY)
+    up_axis: str = choice("z", UP_AXES, doc="mesh: the file's up axis; y (a y-up file, e.g. a "
+                          "scanned body): first turned +90 degrees about x, (x, y, z) -> (x, -z, "
+                          "y), so that its +y becomes +z", only=MESH_ONLY)
+    rotation: Vec3 = setting((0.0, 0.0, 0.0), doc="mesh: rotation about x, then y, then z, "
+                             "about the bounding-box centre, after up_axis and scale",
+                             unit="degrees", only=MESH_ONLY)
+    translation: Vec3 | None = setting(None, doc="mesh: added to every vertex after scale and "
+                                       "rotation; exclusive with center; null: none", unit="m",
+                                       what="[x, y, z] in m", only=MESH_ONLY)
     method: str = choice("bvh", COLLIDER_METHODS, doc="mesh: bvh (BVH closest points for "
                          "contact constraints, vertex-face and edge-edge CCD impulses) or image "
                          "(depth, normal and velocity maps, Vassilev et al. 2001 §4, Eq. 15 "

@@ -27,6 +27,9 @@ class StepResult:
     start_forces: np.ndarray      # (n_local, 3) forces at the start state (contact response)
     position_gain: float          # dx1/dv1: positions follow a post-solve velocity change by it
     history: MultistepHistory | None = None   # kept by the state if the step is committed
+    # (n_owned, 3) impulses of the constraints in the last solve (implicit schemes
+    # with body contacts; linalg/assembly.constraint_impulses), else None
+    reaction: np.ndarray | None = None
     newton_iterations: int = 0
     ksp_iterations: int = 0       # summed over the step's solves
     ksp_residual: float = 0.0     # largest true relative residual of the step's solves

@@ -66,6 +66,7 @@ class ImplicitScheme(Integrator):
         dv_owned, info = ctx.solve(data, b, cons)
         ksp_its, ksp_res = info.iterations, info.residual
         dv = ctx.local_array(dv_owned)
+        reaction = info.reaction
         newton_its, rel, converged = 1, 0.0, True
         max_its = self.cfg.time.newton_iterations
         if max_its > 1:
@@ -86,9 +87,11 @@ class ImplicitScheme(Integrator):
                 dv[:n] += delta
                 ctx.update_ghosts(dv)
                 newton_its += 1
+                reaction = info.reaction
         x1, v1, gain = self.final(ctx, state, h, aff, dv)
         return StepResult(x=x1, v=v1, start_forces=f0, position_gain=gain,
-                          history=self.history(state, h), newton_iterations=newton_its,
+                          history=self.history(state, h), reaction=reaction,
+                          newton_iterations=newton_its,
                           ksp_iterations=ksp_its, ksp_residual=ksp_res, newton_residual=rel,
                           newton_converged=converged)
 

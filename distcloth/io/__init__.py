@@ -4,12 +4,12 @@
 for the protocol); it takes the communicator wrapper of
 ``distcloth/parallel/comm.py`` from the caller and never imports mpi4py itself.
 """
-from distcloth.io.h5read import read_attrs, read_result
+from distcloth.io.h5read import read_attrs, read_colliders, read_result
 from distcloth.io.h5writer import CollectiveError, ResultWriter
-from distcloth.io.xdmf import XdmfAttribute, check_xdmf, write_xdmf
+from distcloth.io.xdmf import XdmfAttribute, XdmfBody, check_xdmf, write_xdmf
 
-__all__ = ["ResultWriter", "CollectiveError", "read_result", "read_attrs",
-           "write_xdmf", "check_xdmf", "XdmfAttribute", "write_previews"]
+__all__ = ["ResultWriter", "CollectiveError", "read_result", "read_attrs", "read_colliders",
+           "write_xdmf", "check_xdmf", "XdmfAttribute", "XdmfBody", "write_previews"]
 
 
 def write_previews(h5_path, **kwargs):

@@ -41,7 +41,8 @@ def read_result(path: str | os.PathLike, *, positions: bool = True,
     ``part``, ``time`` and ``step`` (per frame), ``positions`` (frames, n, 3)
     unless ``positions=False`` (then None), ``diagnostics`` (name -> array,
     including ``step`` and ``time``), ``stage_time`` and ``stage_calls``
-    (stage -> array), ``frames_written``, ``steps_written``.
+    (stage -> array), ``frames_written``, ``steps_written``, ``colliders``
+    (see :func:`read_colliders`; empty for files without colliders).
     ``frames`` picks frames (indices into the written ones) to load.
     """
     with h5py.File(path, "r") as f:
@@ -68,8 +69,39 @@ def read_result(path: str | os.PathLike, *, positions: bool = True,
             # one frame at a time: h5py fancy indexing needs increasing indices
             out["positions"] = (np.stack([pos[int(k)] for k in idx]) if idx.size
                                 else np.zeros((0,) + pos.shape[1:]))
+        out["colliders"] = _colliders(f, idx)
         diag = f["diagnostics"]
         out["diagnostics"] = {k: v[:ns] for k, v in diag.items() if isinstance(v, h5py.Dataset)}
         out["stage_time"] = {k: v[:ns] for k, v in diag["stage_time"].items()}
         out["stage_calls"] = {k: v[:ns] for k, v in diag["stage_calls"].items()}
+    return out
+
+
+def read_colliders(path: str | os.PathLike, *,
+                   frames: slice | list[int] | None = None) -> dict[str, dict[str, Any]]:
+    """The collider surfaces of a result file, by the scene's collider name:
+    ``triangles`` (m, 3), ``positions`` (one row per picked frame if
+    ``moving``, else the single row of a body that never moves: (1, nv, 3)),
+    ``moving`` and ``shape``.  Files of format 1 and scenes without colliders
+    give {}."""
+    with h5py.File(path, "r") as f:
+        nf = int(_plain(f.attrs.get("frames_written", f["frames/time"].shape[0])))
+        idx = np.arange(nf)
+        return _colliders(f, idx if frames is None else idx[frames])
+
+
+def _colliders(f: h5py.File, idx: np.ndarray) -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {}
+    for group, g in f.get("colliders", {}).items():
+        moving = bool(_plain(g.attrs["moving"]))
+        pos = g["positions"]
+        if moving:
+            # one row at a time: h5py fancy indexing needs increasing indices
+            rows = (np.stack([pos[int(k)] for k in idx]) if idx.size
+                    else np.zeros((0,) + pos.shape[1:]))
+        else:
+            rows = pos[...]
+        out[str(_plain(g.attrs.get("name", group)))] = {
+            "triangles": g["triangles"][...], "positions": rows, "moving": moving,
+            "shape": str(_plain(g.attrs.get("shape", "mesh")))}
     return out

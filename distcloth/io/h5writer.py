@@ -12,9 +12,22 @@ Layout (every array in *input* vertex order, whatever the partition)::
     /diagnostics/<name>        (steps,) float64, one per diagnostic name
     /diagnostics/stage_time/<stage>   (steps,) float64 seconds
     /diagnostics/stage_calls/<stage>  (steps,) int64
+    /colliders/<name>/triangles       (m, 3) int64: a collider's surface
+    /colliders/<name>/positions       (frames, nv, 3) float64 if it moves (row k
+                                      at frame k's time), else (1, nv, 3)
+    /colliders/<name> attributes: name (the scene's; '/' in it becomes '_' in
+    the group name), shape (plane | sphere | capsule | box | mesh), moving
     root attributes: status ('running' | 'completed' | 'failed'), error,
     error_step, frames_written, steps_written, format, format_version, plus
     the caller's ``attrs``.
+
+Format versions: 1 had no /colliders; 2 adds it (a scene without colliders
+has no /colliders group).
+
+Colliders come as objects with ``name``, ``shape``, ``triangles`` (m, 3),
+``moving`` and ``vertices(t)`` -> (nv, 3) (collision/surfaces.py makes them);
+every rank passes the same ones (colliders are replicated), computes their
+vertices and rank 0 writes them.
 
 Collective protocol
 -------------------
@@ -52,10 +65,10 @@ import h5py
 import numpy as np
 from h5py import h5fd, h5p, h5s
 
-from distcloth.io.xdmf import XdmfAttribute, write_xdmf
+from distcloth.io.xdmf import XdmfAttribute, XdmfBody, write_xdmf
 
 FORMAT_NAME = "distcloth-result"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 # Above this many runs of consecutive input indices, a rank selects its rows
 # as points instead of an OR of hyperslabs: HDF5 1.10.8 merges each OR'ed
@@ -128,6 +141,34 @@ def _attr_value(key: str, value: Any):
         "a number, a bool or a 1-D list of numbers or of strings")
 
 
+def _group_names(names: Sequence[str]) -> list[str]:
+    """HDF5 group names for collider names: '/' would nest groups and '.' or
+    '..' name none, so they become '_'; a name made equal to an earlier one
+    gets a suffix."""
+    out: list[str] = []
+    for name in names:
+        group = name.replace("/", "_")
+        if group in ("", ".", ".."):
+            group = "_" * max(1, len(group))
+        base, i = group, 1
+        while group in out:
+            group, i = f"{base}_{i}", i + 1
+        out.append(group)
+    return out
+
+
+def _surface(vertices, triangles, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """A collider's vertices (nv, 3) float64 and triangles (m, 3) int64, checked."""
+    x = np.ascontiguousarray(vertices, dtype=np.float64)
+    tri = np.ascontiguousarray(triangles, dtype=np.int64)
+    if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] == 0:
+        raise ValueError(f"collider {name!r}: vertices must be (nv, 3) with nv > 0, got {x.shape}")
+    if tri.ndim != 2 or tri.shape[1] != 3 or (
+            tri.size and (tri.min() < 0 or tri.max() >= x.shape[0])):
+        raise ValueError(f"collider {name!r}: triangles must be (m, 3) indices of its vertices")
+    return x, tri
+
+
 def _runs(sorted_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Starts and lengths of the runs of consecutive integers in a sorted array."""
     if sorted_idx.size == 0:
@@ -185,7 +226,7 @@ class ResultWriter:
                  owned_input: np.ndarray, part: np.ndarray,
                  config_text: str, attrs: Mapping[str, Any],
                  stage_names: Sequence[str], diagnostic_names: Sequence[str],
-                 step_buffer: int = DEFAULT_STEP_BUFFER):
+                 colliders: Sequence[Any] = (), step_buffer: int = DEFAULT_STEP_BUFFER):
         self.path = os.path.abspath(os.fspath(path))
         self._comm = _SerialComm() if comm is None else comm
         self.rank, self.size = int(self._comm.rank), int(self._comm.size)
@@ -213,10 +254,21 @@ class ResultWriter:
         if not np.array_equal(sorted_owned, np.flatnonzero(part == self.rank)):
             raise ValueError(f"rank {self.rank}: owned_input disagrees with part == {self.rank}")
 
+        # Every rank evaluates the colliders (they are replicated, so a bad
+        # one fails everywhere alike); rank 0's arrays are the ones written.
+        colliders = list(colliders)
+        first = [_surface(c.vertices(0.0), c.triangles, c.name) for c in colliders]
+        bodies = [(str(c.name), str(c.shape), bool(c.moving), x.shape[0], tri.shape[0])
+                  for c, (x, tri) in zip(colliders, first)]
+
         # Everything that becomes HDF5 metadata must be identical on all
         # ranks: take rank 0's copy.
-        config_text, attrs, stage_names, diagnostic_names = self._comm.broadcast(
-            (str(config_text), dict(attrs), list(stage_names), list(diagnostic_names)), root=0)
+        config_text, attrs, stage_names, diagnostic_names, bodies = self._comm.broadcast(
+            (str(config_text), dict(attrs), list(stage_names), list(diagnostic_names), bodies),
+            root=0)
+        if len(bodies) != len(colliders):
+            raise ValueError(f"rank {self.rank}: {len(colliders)} colliders, rank 0 has "
+                             f"{len(bodies)}; every rank must pass the same ones")
         for name in stage_names:
             _check_name("stage", name)
         for name in diagnostic_names:
@@ -311,6 +363,27 @@ class ResultWriter:
         f.require_group("diagnostics/stage_time")
         f.require_group("diagnostics/stage_calls")
         self._n_buffered = 0
+
+        # Collider surfaces: triangles once; positions once for a body that
+        # never moves, else a row per frame (write_frame).
+        self._moving: list[tuple[Any, h5py.Dataset]] = []
+        self._xdmf_bodies: list[XdmfBody] = []
+        for c, (x, tri), (name, shape, moving, nv, m), group in zip(
+                colliders, first, bodies, _group_names([b[0] for b in bodies])):
+            g = f.create_group(f"colliders/{group}")
+            g.attrs["name"] = name
+            g.attrs["shape"] = shape
+            g.attrs["moving"] = np.bool_(moving)
+            self._write_root(g.create_dataset("triangles", shape=(m, 3), dtype=np.int64), tri)
+            if moving:
+                ds = g.create_dataset("positions", shape=(0, nv, 3), maxshape=(None, nv, 3),
+                                      chunks=(1, min(nv, FRAME_CHUNK_VERTICES), 3),
+                                      dtype=np.float64)
+                self._moving.append((c, ds))
+            else:
+                ds = g.create_dataset("positions", shape=(1, nv, 3), dtype=np.float64)
+                self._write_root(ds, x[None])
+            self._xdmf_bodies.append(XdmfBody(name, f"/colliders/{group}", nv, m, moving))
         f.flush()
 
     # ------------------------------------------------------------ low level
@@ -365,7 +438,8 @@ class ResultWriter:
             write_xdmf(self.xdmf_path, os.path.basename(self.path), self.n_vertices,
                        self.n_triangles, self._times,
                        extra_attributes=[XdmfAttribute("rank", "/partition/part", (self.n_vertices,),
-                                                       number_type="Int", precision=4)])
+                                                       number_type="Int", precision=4)],
+                       bodies=self._xdmf_bodies)
         except OSError as err:
             warnings.warn(f"could not write {self.xdmf_path}: {err}", RuntimeWarning)
 
@@ -375,13 +449,16 @@ class ResultWriter:
 
     # ------------------------------------------------------------ public API
 
-    def write_frame(self, step: int, time: float, positions_owned: np.ndarray) -> None:
+    def write_frame(self, step: int, time: float, positions_owned: np.ndarray,
+                    body_time: float | None = None) -> None:
         """Collective: append one frame; each rank writes its own rows.
 
         ``positions_owned`` is (n_owned, 3) in this rank's ``owned_input``
-        order.  Buffered steps are written first, and the file is flushed and
-        the XDMF sidecar rewritten afterwards, so a crash later leaves this
-        frame readable.
+        order.  Moving colliders get a row each, their surface at
+        ``body_time`` (default ``time``; a drape's frame 'time' is its
+        iteration).  Buffered steps are written first, and the file is
+        flushed and the XDMF sidecar rewritten afterwards, so a crash later
+        leaves this frame readable.
         """
         self._require_open()
         data = np.asarray(positions_owned, dtype=np.float64)
@@ -402,6 +479,14 @@ class ResultWriter:
         self._write(self._positions, mspace, fspace, rows)
         self._write_root(self._frame_time, np.array([time], np.float64), start=k)
         self._write_root(self._frame_step, np.array([step], np.int64), start=k)
+        t_body = float(time if body_time is None else body_time)
+        for c, ds in self._moving:
+            x, _ = _surface(c.vertices(t_body), c.triangles, c.name)
+            if x.shape[0] != ds.shape[1]:
+                raise ValueError(f"collider {c.name!r}: {x.shape[0]} vertices at t = {t_body:g}, "
+                                 f"{ds.shape[1]} at t = 0")
+            ds.resize(k + 1, axis=0)
+            self._write_root(ds, x[None], start=k)
         self.frames_written = k + 1
         self._times.append(float(time))
         self._file.attrs["frames_written"] = np.int64(self.frames_written)

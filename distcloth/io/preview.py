@@ -1,7 +1,11 @@
 """Quick-look pictures of a result file (rank 0, after the run, serial read).
 
 ``<stem>_frames.png``: the first, two intermediate and the last written frame
-as Lambert-shaded surfaces in one common, equal-aspect bounding box.
+as Lambert-shaded surfaces in one common, equal-aspect bounding box, with the
+colliders where they were at each frame, semi-transparent grey.  The box
+holds the cloth and the bounded bodies, but these no further than one cloth
+size from the cloth (a huge body or terrain must not shrink the cloth to a
+dot); a plane is drawn as a square filling the box.
 ``<stem>_energy.png``: energies, solver iterations and the stage-time split.
 
 Uses matplotlib's object API with the Agg canvas (no pyplot, no global
@@ -21,7 +25,16 @@ from distcloth.io.h5read import read_attrs, read_result
 # Poly3DCollection costs ~20 us per polygon to sort and draw; beyond this
 # many triangles per panel the mesh is decimated for the picture.
 MAX_PREVIEW_TRIANGLES = 30000
+# The colliders of a panel share this many triangles (an even split); a mesh
+# with more is decimated like the cloth, by vertex clustering on its first row.
+MAX_COLLIDER_TRIANGLES = 10000
+# A plane's square is cut into this many cells per side: the painter's sort
+# orders whole triangles, and two triangles as large as the picture would
+# hide the cloth's front or show its back through them.
+PLANE_CELLS = 12
 _CLOTH_RGB = np.array([0.30, 0.52, 0.80])
+_BODY_RGB = np.array([0.60, 0.60, 0.60])
+BODY_ALPHA = 0.35
 _LIGHT = np.array([0.35, -0.45, 0.82]) / np.linalg.norm([0.35, -0.45, 0.82])
 ENERGY_NAMES = ("kinetic_energy", "gravitational_energy", "elastic_energy", "total_energy")
 ITERATION_NAMES = ("ksp_iterations", "newton_iterations")
@@ -59,34 +72,114 @@ def decimate(rest: np.ndarray, triangles: np.ndarray, target: int) -> tuple[np.n
     return cluster, coarse
 
 
-def _shade(tri_xyz: np.ndarray) -> np.ndarray:
+def _shade(tri_xyz: np.ndarray, rgb: np.ndarray = _CLOTH_RGB) -> np.ndarray:
     """RGB per triangle: ambient + two-sided Lambert term of its normal."""
     nrm = np.cross(tri_xyz[:, 1] - tri_xyz[:, 0], tri_xyz[:, 2] - tri_xyz[:, 0])
     length = np.linalg.norm(nrm, axis=1, keepdims=True)
     nrm = np.divide(nrm, length, out=np.zeros_like(nrm), where=length > 0)
     lambert = np.abs(nrm @ _LIGHT)           # cloth has two sides: light either
-    return np.clip(_CLOTH_RGB[None, :] * (0.3 + 0.8 * lambert[:, None]), 0.0, 1.0)
+    return np.clip(rgb[None, :] * (0.3 + 0.8 * lambert[:, None]), 0.0, 1.0)
 
 
-def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int) -> None:
+def _cluster_means(cluster: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """Each frame's (frames, n, 3) vertices averaged over the clusters of ``decimate``."""
+    counts = np.bincount(cluster).astype(float)
+    coarse = np.empty((positions.shape[0], counts.size, 3))
+    for f, x in enumerate(positions):
+        for c in range(3):
+            coarse[f, :, c] = np.bincount(cluster, weights=x[:, c]) / counts
+    return coarse
+
+
+def _bodies(colliders: dict, budget: int) -> tuple[list[dict], int]:
+    """The colliders to draw, each decimated to its share of ``budget``
+    triangles; and how many were decimated."""
+    bodies, decimated = [], 0
+    share = budget // max(1, len(colliders))
+    for body in colliders.values():
+        tri, rows = body["triangles"], body["positions"]
+        if rows.shape[0] == 0:
+            continue
+        if body["shape"] != "plane" and tri.shape[0] > share:
+            cluster, tri = decimate(rows[0], tri, share)
+            rows = _cluster_means(cluster, rows)
+            decimated += 1
+        bodies.append({"triangles": tri, "positions": rows, "moving": body["moving"],
+                       "plane": body["shape"] == "plane"})
+    return bodies, decimated
+
+
+def _plane_point(quad: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """The projection of ``point`` on the plane of a stored square (4 corners)."""
+    n = np.cross(quad[1] - quad[0], quad[3] - quad[0])
+    n /= np.linalg.norm(n)
+    return point - ((point - quad[0]) @ n) * n
+
+
+def _view(cloth: np.ndarray, bodies: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """[low, high] of the picture: the cloth's box joined with the bounded
+    bodies' boxes and the planes' points under its centre, these cut to one
+    cloth size around the cloth (and left out if wholly beyond it)."""
+    lo, hi = cloth.reshape(-1, 3).min(axis=0), cloth.reshape(-1, 3).max(axis=0)
+    reach = float((hi - lo).max())
+    near_lo, near_hi = lo - reach, hi + reach
+    for body in sorted(bodies, key=lambda b: b["plane"]):     # planes last: under the box
+        if body["plane"]:
+            x = np.array([_plane_point(q, 0.5 * (lo + hi)) for q in body["positions"]])
+        else:
+            x = body["positions"].reshape(-1, 3)
+        b_lo, b_hi = x.min(axis=0), x.max(axis=0)
+        if np.any(b_lo > near_hi) or np.any(b_hi < near_lo):
+            continue                                  # out of reach: not in the picture
+        lo = np.minimum(lo, np.maximum(b_lo, near_lo))
+        hi = np.maximum(hi, np.minimum(b_hi, near_hi))
+    span = np.maximum(hi - lo, 1e-3 * max(float((hi - lo).max()), 1e-9))
+    mid = 0.5 * (lo + hi)
+    return mid - 0.5 * span, mid + 0.5 * span
+
+
+def _plane_cells(quad: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Triangles (2 PLANE_CELLS², 3, 3) of a plane's square (its 4 stored
+    corners, collision/surfaces.py) moved under the view's centre and sized
+    to the view's largest side."""
+    a, b = quad[1] - quad[0], quad[3] - quad[0]
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    centre = _plane_point(quad, 0.5 * (lo + hi))
+    half = 0.5 * float((hi - lo).max())
+    s = np.linspace(-half, half, PLANE_CELLS + 1)
+    u, v = np.meshgrid(s, s, indexing="ij")
+    grid = centre + u[..., None] * a + v[..., None] * b            # (cells + 1, cells + 1, 3)
+    p00, p10, p11, p01 = grid[:-1, :-1], grid[1:, :-1], grid[1:, 1:], grid[:-1, 1:]
+    return np.concatenate([np.stack([p00, p10, p11], axis=2).reshape(-1, 3, 3),
+                           np.stack([p00, p11, p01], axis=2).reshape(-1, 3, 3)])
+
+
+def _body_triangles(body: dict, frame: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """A body's triangles (m, 3, 3) at a picked frame, those whose centre is
+    outside the view left out."""
+    x = body["positions"][frame if body["moving"] else 0]
+    xyz = _plane_cells(x, lo, hi) if body["plane"] else x[body["triangles"]]
+    centre = xyz.mean(axis=1)
+    slack = 1e-6 * float((hi - lo).max())
+    inside = np.all((centre >= lo - slack) & (centre <= hi + slack), axis=1)
+    return xyz[inside]
+
+
+def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int,
+                max_collider_triangles: int = MAX_COLLIDER_TRIANGLES) -> None:
     positions, times = res["positions"], res["time"]
     tri = res["triangles"]
     nt = tri.shape[0]
     note = ""
     if nt > max_triangles:
         cluster, tri = decimate(res["rest_positions"], tri, max_triangles)
-        counts = np.bincount(cluster).astype(float)
-        coarse = np.empty((positions.shape[0], counts.size, 3))
-        for f, x in enumerate(positions):
-            for c in range(3):
-                coarse[f, :, c] = np.bincount(cluster, weights=x[:, c]) / counts
-        positions = coarse
+        positions = _cluster_means(cluster, positions)
         note = f"\n(decimated: {tri.shape[0]} of {nt} triangles)"
-    lo = positions.reshape(-1, 3).min(axis=0)
-    hi = positions.reshape(-1, 3).max(axis=0)
-    span = np.maximum(hi - lo, 1e-3 * max(float((hi - lo).max()), 1e-9))
-    mid = 0.5 * (lo + hi)
-    lo, hi = mid - 0.5 * span, mid + 0.5 * span
+    bodies, decimated = _bodies(res.get("colliders", {}), max_collider_triangles)
+    if decimated:
+        note += f"\n({decimated} collider mesh{'es' if decimated > 1 else ''} decimated)"
+    lo, hi = _view(positions, bodies)
+    span = hi - lo
     fig = Figure(figsize=(4.2 * len(idx), 4.6), dpi=100)
     FigureCanvasAgg(fig)
     status = res["attrs"].get("status", "?")
@@ -95,7 +188,16 @@ def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int) -> None
     for p, (x, t) in enumerate(zip(positions, times)):
         ax = fig.add_subplot(1, len(idx), p + 1, projection="3d")
         xyz = x[tri]
-        ax.add_collection3d(Poly3DCollection(xyz, facecolors=_shade(xyz), edgecolors="none",
+        rgba = np.concatenate([_shade(xyz), np.ones((xyz.shape[0], 1))], axis=1)
+        for body in bodies:
+            body_xyz = _body_triangles(body, p, lo, hi)
+            body_rgba = np.concatenate([_shade(body_xyz, _BODY_RGB),
+                                        np.full((body_xyz.shape[0], 1), BODY_ALPHA)], axis=1)
+            xyz = np.concatenate([xyz, body_xyz])
+            rgba = np.concatenate([rgba, body_rgba])
+        # one collection: the painter's sort then orders cloth and bodies
+        # triangle by triangle (between collections it orders whole collections)
+        ax.add_collection3d(Poly3DCollection(xyz, facecolors=rgba, edgecolors="none",
                                              linewidths=0))
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])

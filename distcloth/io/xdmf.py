@@ -2,9 +2,11 @@
 
 The light data (XML) only points into the HDF5 file: every frame is a Uniform
 grid whose Topology is ``/mesh/triangles`` and whose Geometry is frame k of
-``/frames/positions``, taken as a HyperSlab, so nothing is duplicated.  The
-HDF5 file is referenced by its bare name: the sidecar sits beside it and the
-pair can be moved together.
+``/frames/positions``, taken as a HyperSlab, so nothing is duplicated.  Each
+collider is a second temporal collection with the same times, its surface
+at frame k (row 0 for a body that never moves), so ParaView shows it as
+another block.  The HDF5 file is referenced by its bare name: the sidecar
+sits beside it and the pair can be moved together.
 """
 from __future__ import annotations
 
@@ -39,6 +41,17 @@ class XdmfAttribute:
     per_frame: bool = False
 
 
+@dataclass(frozen=True)
+class XdmfBody:
+    """A collider surface of the result file: ``group``/triangles (m, 3) and
+    ``group``/positions, (frames, nv, 3) when ``moving``, else (1, nv, 3)."""
+    name: str
+    group: str                   # e.g. "/colliders/ball"
+    n_vertices: int
+    n_triangles: int
+    moving: bool
+
+
 def _dims(shape: Sequence[int]) -> str:
     return " ".join(str(int(d)) for d in shape)
 
@@ -64,8 +77,10 @@ def _hyperslab(parent, h5_filename, dataset, full_shape, k, number_type, precisi
 
 def write_xdmf(xdmf_path: str | os.PathLike, h5_filename: str, n_vertices: int,
                n_triangles: int, times: Sequence[float],
-               extra_attributes: Sequence[XdmfAttribute] | None = None) -> None:
-    """Write an XDMF 3 temporal collection for ``len(times)`` frames.
+               extra_attributes: Sequence[XdmfAttribute] | None = None,
+               bodies: Sequence[XdmfBody] = ()) -> None:
+    """Write an XDMF 3 temporal collection for ``len(times)`` frames, and one
+    per collider in ``bodies``.
 
     The file is written to a temporary name and renamed, so a reader (or a
     crash) never sees half a file.  ``h5_filename`` should be the bare file
@@ -94,6 +109,20 @@ def write_xdmf(xdmf_path: str | os.PathLike, h5_filename: str, n_vertices: int,
                            a.number_type, a.precision)
             else:
                 _hdf_item(attr, h5_filename, a.dataset, a.dims, a.number_type, a.precision)
+    for body in bodies:
+        series = ET.SubElement(domain, "Grid", Name=f"collider {body.name}", GridType="Collection",
+                               CollectionType="Temporal")
+        rows = n_frames if body.moving else 1
+        for k, t in enumerate(times):
+            grid = ET.SubElement(series, "Grid", Name=f"{body.name}_{k:06d}", GridType="Uniform")
+            ET.SubElement(grid, "Time", Value=repr(float(t)))
+            topo = ET.SubElement(grid, "Topology", TopologyType="Triangle",
+                                 NumberOfElements=str(int(body.n_triangles)))
+            _hdf_item(topo, h5_filename, f"{body.group}/triangles", (body.n_triangles, 3),
+                      "Int", 8)
+            geom = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
+            _hyperslab(geom, h5_filename, f"{body.group}/positions", (rows, body.n_vertices, 3),
+                       k if body.moving else 0, "Float", 8)
     ET.indent(root, space=" ")
     tmp = xdmf_path + ".tmp"
     with open(tmp, "w", encoding="utf-8") as fh:
@@ -118,7 +147,8 @@ def check_xdmf(xdmf_path: str | os.PathLike) -> list[str]:
     inside it, and the count matches the slab's Dimensions.  Also: triangle
     topologies hold NumberOfElements x 3 indices, XYZ geometries have 3
     columns, node attributes one value per geometry point, and times
-    increase.  Returns the problems found (an empty list means valid).
+    increase within each collection.  Returns the problems found (an empty
+    list means valid).
     """
     xdmf_path = os.fspath(xdmf_path)
     folder = os.path.dirname(os.path.abspath(xdmf_path))
@@ -200,15 +230,17 @@ def check_xdmf(xdmf_path: str | os.PathLike) -> list[str]:
         grids = [g for g in root.iter("Grid") if g.get("GridType", "Uniform") == "Uniform"]
         if not grids:
             problems.append("no Uniform grid")
-        last_time = -np.inf
+        parent = {child: p for p in root.iter() for child in p}
+        last_time: dict[int, float] = {}     # per enclosing collection: the cloth, each collider
         for g in grids:
             name = g.get("Name", "?")
             t = g.find("Time")
             if t is not None:
                 value = float(t.get("Value"))
-                if not value > last_time:
+                series = id(parent.get(g))
+                if not value > last_time.get(series, -np.inf):
                     problems.append(f"grid {name}: time {value} does not increase")
-                last_time = value
+                last_time[series] = value
             n_points = None
             geom = g.find("Geometry")
             if geom is None or geom.find("DataItem") is None:

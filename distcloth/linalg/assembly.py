@@ -46,3 +46,12 @@ def solve_constrained(system, pattern, data: np.ndarray, rhs: np.ndarray, cons: 
     owned = cons.index < pattern.n_owned
     y[cons.index[owned]] += cons.z[owned]
     return y, info
+
+
+def constraint_impulses(pattern, data: np.ndarray, rhs: np.ndarray, dv_local: np.ndarray):
+    """A dv - b on the owned rows (``dv_local``: the solution with its ghost
+    rows): zero, up to the solver's tolerance, where the system was solved; at
+    a constrained vertex the impulse its constraint added to the momentum
+    balance M dv = h f + impulse (Baraff and Witkin 1998 §5.3: the constraint
+    force is what the filtered rows leave out)."""
+    return (pattern.local_matrix(data) @ dv_local.ravel()).reshape(-1, 3) - rhs

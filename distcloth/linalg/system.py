@@ -32,6 +32,9 @@ class SolveInfo:
     iterations: int
     reason: int
     residual: float      # true relative residual |b - A y| / |b|
+    # (n_owned, 3) A dv - b of the unconstrained system at the solution: at a
+    # constrained vertex, the impulse its constraint applied (filled by the caller)
+    reaction: np.ndarray | None = None
 
 
 class LinearSystem:

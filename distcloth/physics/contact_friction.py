@@ -90,6 +90,10 @@ class ContactFrictionTerm(ForceTerm):
         slide = speed - mu * N * h / m
         return mu * N / np.maximum(slide, V_STICK)
 
+    def force_at(self, v_rows):
+        """The friction force of this step's contacts at their velocities ``v_rows``."""
+        return -self.c[:, None] * np.einsum("nij,nj->ni", self.P, v_rows - self.u)
+
     def add_to_system(self, data, alpha, beta):
         if self.index.size == 0 or self.c is None:
             return

@@ -1,4 +1,4 @@
-"""Place a piece in the world: rotate, then move its bounding-box centre.
+"""Place a piece or a body in the world: rotate, then move its bounding-box centre.
 
 Rotation angles are degrees about the fixed world axes x, then y, then z
 (docs/config.md), i.e. R = Rz Ry Rx acting on column vectors.
@@ -18,6 +18,12 @@ def rotation_matrix(degrees) -> np.ndarray:
     return rz @ ry @ rx
 
 
+# (x, y, z) -> (x, -z, y): +90 degrees about x, so a y-up file's +y becomes +z.
+# Written out rather than rotation_matrix((90, 0, 0)) so the turn is exact
+# (cos 90° is 6e-17 in floating point): a turned file keeps its coordinates' bits.
+Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
 def bounding_box_center(points: np.ndarray) -> np.ndarray:
     return 0.5 * (points.min(axis=0) + points.max(axis=0))
 
@@ -26,3 +32,21 @@ def place(points: np.ndarray, rotation, center) -> np.ndarray:
     """Rotate ``points`` (n, 3) and translate so their bounding-box centre is ``center``."""
     rotated = points @ rotation_matrix(rotation).T
     return rotated + (np.asarray(center, dtype=np.float64) - bounding_box_center(rotated))
+
+
+def place_frames(frames: np.ndarray, rotation, *, center=None, translation=None) -> np.ndarray:
+    """One rigid placement of every frame of a sequence (k, n, 3), computed
+    from frame 0: rotate about frame 0's bounding-box centre, then move frame
+    0's bounding-box centre to ``center`` or add ``translation`` (at most one
+    of them).  A zero rotation and no move leave the frames bit for bit."""
+    if center is not None and translation is not None:
+        raise ValueError("place_frames: give center or translation, not both")
+    placed = np.asarray(frames, dtype=np.float64)
+    if np.any(np.asarray(rotation, dtype=np.float64) != 0.0):
+        pivot = bounding_box_center(placed[0])
+        placed = (placed - pivot) @ rotation_matrix(rotation).T + pivot
+    if center is not None:
+        placed = placed + (np.asarray(center, dtype=np.float64) - bounding_box_center(placed[0]))
+    elif translation is not None:
+        placed = placed + np.asarray(translation, dtype=np.float64)
+    return placed
