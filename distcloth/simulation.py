@@ -251,8 +251,8 @@ class Simulation:
         return assemble_blocks(self.pattern, self.mass[: self.n_owned], self.terms, alpha, beta,
                                gamma)
 
-    def _solve(self, data, rhs, cons):
-        y, info = solve_constrained(self.system, self.pattern, data, rhs, cons)
+    def _solve(self, data, rhs, cons, guess=None):
+        y, info = solve_constrained(self.system, self.pattern, data, rhs, cons, guess)
         if self.contact.has_bodies:   # the same on every rank: the exchange is collective
             dv = np.zeros((self.n_local, 3))
             dv[: self.n_owned] = y
@@ -364,15 +364,17 @@ class Simulation:
         fatal) with the state unchanged."""
         state, pipe, contact = self.state, self.pipeline, self.contact
         target = pipe.run("kinematics")
-        revision, contacts = None, None
+        revision, contacts, result = None, None, None
         for _ in range(MAX_CONTACT_PASSES if contact.has_bodies else 1):
             if contact.has_bodies:
                 contacts = pipe.run("collision:bodies", state, h, revision)
                 contact.begin_attempt(contacts, h)
             cons = pipe.run("constraints", target, contacts)
-            error, solver_failure, result = None, False, None
+            error, solver_failure = None, False
             try:
-                result = self.integrator.step(self.ctx, state, h, cons)
+                # a re-solve starts from the last solve's velocity change
+                guess = None if result is None else result.v - state.v[: self.n_owned]
+                result = self.integrator.step(self.ctx, state, h, cons, guess)
             except SolverFailure as exc:      # the same on every rank
                 error, solver_failure = f"SolverFailure: {exc}", True
             except Exception as exc:          # a local bug is not: agree on it
@@ -388,13 +390,13 @@ class Simulation:
             revision = contact.revise(contacts, result, state.t + h, h, revision)
             if revision is None:
                 break
-        result.contact_report = None
+        result.contact_report, result.touching = None, None
         if contact.has_response:
             error = None
             try:
                 response = pipe.run("collision:response", state, contacts, result, h)
                 result.x, result.v = response.x, response.v
-                result.contact_report = response.report
+                result.contact_report, result.touching = response.report, response.touching
             except Exception as exc:
                 error = f"{type(exc).__name__} in the collision response: {exc}"
             agreed = self.comm.agree(error)
@@ -420,6 +422,7 @@ class Simulation:
         state.t = t_end
         state.history = result.history
         state.contacts = contacts
+        state.touching = result.touching
         state.acceleration = acceleration
         if not result.newton_converged:
             if state.newton_unconverged == 0:

@@ -35,6 +35,7 @@ class State:
     step: int = 0                        # steps completed (or being taken)
     history: MultistepHistory | None = None
     contacts: Any = None                 # the body contacts the last committed step used
+    touching: np.ndarray | None = None   # (k, n_local) bool: near each body at its end
     acceleration: np.ndarray | None = None   # (n_local, 3) (v - v_before) / h of the last step
     # the energy guard's (E_ref, S) once the scene became passive
     energy_reference: tuple[float, float] | None = None
@@ -52,7 +53,8 @@ class State:
         """Become ``saved`` again, keeping the array objects (other code holds them)."""
         self.x[...] = saved.x
         self.v[...] = saved.v
-        for name in ("t", "step", "history", "contacts", "acceleration", "energy_reference",
+        for name in ("t", "step", "history", "contacts", "touching", "acceleration",
+                     "energy_reference",
                      "rejections", "newton_unconverged"):
             setattr(self, name, getattr(saved, name))
 

@@ -44,9 +44,10 @@ class StepContext:
         """Block values of A = gamma M - beta df/dv - alpha df/dx (owned rows)."""
         return self.pipeline.run("assembly", alpha, beta, gamma)
 
-    def solve(self, data, rhs, cons):
-        """(dv on the owned rows, solve info) of A dv = rhs under the constraints."""
-        return self.pipeline.run("solve", data, rhs, cons)
+    def solve(self, data, rhs, cons, guess=None):
+        """(dv on the owned rows, solve info) of A dv = rhs under the constraints,
+        the iteration started from ``guess`` (owned rows) if given."""
+        return self.pipeline.run("solve", data, rhs, cons, guess)
 
     def local_array(self, owned_rows: np.ndarray) -> np.ndarray:
         """(n_local, k): the owned rows with their ghost copies filled in."""

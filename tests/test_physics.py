@@ -14,25 +14,27 @@ from distcloth.physics.terms import SpringTerm
 from distcloth.scene import build_model
 
 
-def make_sim(raw, model=None, force=False):
+def make_sim(raw, model=None, force=False, comm=None):
+    """A prepared Simulation of the raw scene on ``comm`` (an mpi4py
+    communicator; default the world)."""
     from distcloth.linalg.petsc import init_petsc
     init_petsc([])
     from distcloth.parallel.comm import Comm
     from distcloth.simulation import Simulation
     cfg = config_from_dict(raw, ".", "test")
     model = model if model is not None else build_model(cfg)
-    sim = Simulation(cfg, model, Comm(), quiet=True, force_explicit=force)
+    sim = Simulation(cfg, model, Comm(comm), quiet=True, force_explicit=force)
     sim.prepare()
     return sim
 
 
 def gather_positions(sim):
-    """Global positions in input order on every rank (test helper only)."""
-    from mpi4py import MPI
+    """Global positions in input order on every rank of the simulation's
+    communicator (test helper only)."""
     n = sim.model.num_vertices
     out = np.zeros((n, 3))
     out[sim.layout.owned_input] = sim.owned_positions()
-    return MPI.COMM_WORLD.allreduce(out, op=MPI.SUM)
+    return sim.comm.sum(out)
 
 
 def grid_scene(**over):

@@ -58,9 +58,11 @@ from .response import Contacts, contact_constraint, detect, friction, normal_imp
 
 MAX_CONTACT_PASSES = 4   # solves per attempt at most while the contact set changes
 MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
-BAND_FRACTION = 0.5      # a contact of the last step predicted to end within this fraction of
-                         # d above d is kept, at its free-flight approach (response.detect):
-                         # contact sets persist, so the first solve of a step is usually right
+BAND_FRACTION = 0.5      # a vertex that ended the last step within this fraction of d above d
+                         # and is predicted to end this one there too is a contact, held at
+                         # its free-flight approach (response.detect): contact sets persist,
+                         # so the first solve is usually right, and tension that presses cloth
+                         # onto a body meets the solve, not the fail-safe
 ADHESION_TOLERANCE = 1e-3   # a contact is adhesive when its constraint pulls by more than this
                             # fraction of the vertex's weight impulse m g h
 CANDIDATE_SLACK = 0.5    # the CCD passes of a step reuse their candidates while no end position
@@ -169,6 +171,9 @@ class ContactResponse:
     """The response stage's result: the corrected proposal and what it measured."""
     x: np.ndarray
     v: np.ndarray
+    # (k, n_local) bool: within (1 + BAND_FRACTION) d of each body at the end of
+    # the step (before the fail-safe): the next step keeps these contacts
+    touching: np.ndarray | None
     report: ContactReport = field(default_factory=ContactReport)
 
 
@@ -263,10 +268,9 @@ class ContactModel:
         reach = (1.0 + BAND_FRACTION) * self.d_max + h * speed + h * h * self.gravity_norm
         phis, normals, vels, offsets = self.query(x, state.t, np.inf if forced is not None else reach)
         frictions = np.array([c.friction for c in self.colliders])
-        persistent = np.zeros(phis.shape, dtype=bool)
-        last = state.contacts
-        if last is not None and last.index.size:
-            persistent[last.collider, last.index] = True
+        # what touched a body at the end of the last step: the solve's contacts,
+        # and vertices pressed against a body that the fail-safe put back
+        persistent = state.touching
         # free flight continues the last step's acceleration (tension and support
         # included); before any step, gravity's
         accel = self.gravity if state.acceleration is None else state.acceleration
@@ -308,6 +312,11 @@ class ContactModel:
         free = ~self.never_contact[:n]
         free[idx] = False
         flags[:n, 1:] = ((offsets - phis > MISSED_FRACTION * offsets) & free[None]).T
+        if revision is not None:
+            # only what the revision does not already hold changes the contact
+            # set; a missed contact lands at d even if its landing pulls
+            flags[:n, 0] *= ~(revision.released[:n] | revision.missed[:, :n].any(axis=0))
+            flags[:n, 1:] *= ~revision.missed[:, :n].T
         if self.comm.max(np.array([float(flags.any())]))[0] == 0.0:
             return None
         self.ghosts.update(flags)
@@ -353,18 +362,23 @@ class ContactModel:
         # part of the motion the CCD checks, so lifting a layer out of a body
         # cannot carry it through the layer above
         t_end = state.t + h
+        touching = None
         if self.colliders:
             x0, v0 = x_new.copy(), v_new.copy()
-            x_new, v_new, report.max_penetration, report.projected_vertices = \
+            x_new, v_new, report.max_penetration, report.projected_vertices, near = \
                 self._failsafe(x_new, v_new, t_end)
             report.failsafe_work = self._work_of_change(x0, v0, x_new, v_new)
+            flags = np.zeros((self.n_local, len(self.colliders)))
+            flags[:n] = near.T
+            self.ghosts.update(flags)
+            touching = flags.T > 0.5
         if self.detector is not None:
             x0, v0 = x_new, v_new
             x_new, v_new = self._triangle_contact(state, x_new, v_new, h, gain, report)
             report.impulse_work = self._work_of_change(x0, v0, x_new, v_new)
             if self.self_collision:
                 report.self_intersections = float(self._count_crossings(x_new, t_end))
-        return ContactResponse(x_new, v_new, report)
+        return ContactResponse(x_new, v_new, touching, report)
 
     def _solve_friction_work(self, x0, x1, v1, h) -> float:
         """Work of the friction force of the solve over the step, relative to the body."""
@@ -410,9 +424,10 @@ class ContactModel:
         on which side of a zero-thickness panel a vertex belongs)."""
         n = self.n_owned
         free = ~self.never_contact[:n]
-        reach = self.d_max
+        reach = (1.0 + BAND_FRACTION) * self.d_max
         phis, normals, vels, offsets = self.query(x_new, t_end, reach)
         pen = float(np.max((offsets - phis)[:, free], initial=-np.inf))
+        touching = (phis < (1.0 + BAND_FRACTION) * offsets) & free[None]
         moved = np.zeros(n, dtype=bool)
         for j, c in enumerate(self.colliders):
             if not c.closed:
@@ -423,7 +438,7 @@ class ContactModel:
                                      vels[j][free], offsets[j][free])
             x_new[free], v_new[free] = xs, vs
             moved[np.nonzero(free)[0][inside]] = True
-        return x_new, v_new, pen, int(moved.sum())
+        return x_new, v_new, pen, int(moved.sum()), touching
 
     def _triangle_contact(self, state, x_new, v_new, h, gain, report):
         """Bridson et al. 2002 on the all-gathered cloth plus the mesh

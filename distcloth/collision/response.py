@@ -3,29 +3,42 @@
 The contact module (``collision/contact.py``) queries the colliders and hands
 their phi / normal / velocity arrays to these functions.  Why each choice:
 
-**Contact zone.**  A vertex touches collider c when its *predicted* distance
-``phi + h (v - v_b).n`` is below ``d + margin`` with ``d`` = cloth thickness +
-collider thickness and ``margin = d + h^2 |g|``.  Prediction with the
-current velocity catches a cloth arriving fast (1.4 m/s after a 0.1 m fall
-moves 7 mm per 5 ms step, several d); the margin catches what the step's
-own acceleration adds (a resting vertex at phi = d would otherwise fall
-h^2 g = 0.25 mm into a 1 mm offset every step before being noticed).
-With several colliders the *deepest* (smallest phi - d) wins: one
-constraint per vertex keeps S a projection and the filtered system
-unchanged; a vertex wedged between two bodies is then held by the deeper
-one and put back by the position fail-safe, which visits every collider.
+**Unilateral contact: who is a contact.**  d = cloth thickness + collider
+thickness is the offset the cloth keeps from a body.  A vertex is predicted
+to end the step at ``phi + h v_free`` with ``v_free = (v - v_b).n + h a.n``
+its relative normal velocity after a step of free flight (``a``: the
+vertex's acceleration in the last step, tension and support included;
+gravity before the first).  It becomes a contact when
 
-**Constraint in the implicit solve (Baraff and Witkin 1998 §5).**  A
-contact is S = I - n n^T and a prescribed normal velocity
-``v.n = v_b.n + (d - phi)/h``: the vertex ends the step exactly at phi = d
-(to first order in the curvature), so a penetrating vertex is pushed out
-over one step and an approaching one lands on the offset surface instead
-of stopping short.  The tangential directions stay free, the solve sees the
-contact (no stiff penalty, no step-size limit), and the matrix pattern
-never changes.  Pins and sliding pins win over contacts (a pinned vertex
-stays pinned).  A contact whose normal impulse was adhesive (negative) in
-the previous step is released for one step, as Baraff and Witkin do,
-unless it is penetrating.
+* the prediction falls inside d (it *lands*): its normal velocity is
+  prescribed as ``v_b.n + (d - phi)/h``, so it ends the step exactly at
+  phi = d (to first order in the curvature); a vertex already inside is
+  pushed out over one step; or
+* it touched the body at the end of the last step (within 1.5 d) and the
+  prediction stays within that band (it is *kept*): its normal velocity is
+  held at ``v_b.n + min(v_free, 0)``, its free-flight approach or rest,
+  never a pull toward the body.
+
+No other vertex is constrained, however close: a cloth hovering above a
+body stays where it is.  After the solve the contact model (``revise``)
+releases every contact whose constraint impulse turned adhesive (the
+constraint held the vertex against a pull away from the body) and makes a
+contact of every free vertex that ended deeper than 5 % of d inside, and the
+step is solved again (at most four solves): what is left is a set in which
+every constraint pushes.  A landing constraint slows an approaching vertex
+(negative work), a kept one does no work at rest; positive work is done only
+in pushing a penetrating vertex out, by at most its depth, and the works are
+in the step's diagnostics (``contact_work``).  With several colliders the
+*deepest* (smallest phi - d) wins: one constraint per vertex keeps S a
+projection; a vertex wedged between two bodies is held by the deeper one and
+put back by the position fail-safe, which visits every collider.
+
+**Constraint in the implicit solve (Baraff and Witkin 1998 §5).**  A contact
+is S = I - n n^T and a prescribed normal velocity: the tangential directions
+stay free, the solve sees the contact (no stiff penalty, no step-size
+limit), and the matrix pattern never changes.  Pins and sliding pins win
+over contacts.  The constraint's impulse is what the filtered rows of the
+solve leave out (``linalg/assembly.constraint_impulses``).
 
 **Coulomb friction after the solve (Bridson et al. 2002 §7.3)**, for the
 explicit schemes (implicit ones take friction into the solve,
@@ -87,9 +100,9 @@ def detect(phis, normals, velocities, v, offsets, frictions, h, accel, band, exc
     cloth velocities; ``offsets`` (k, n) d per collider and vertex;
     ``frictions`` (k,); ``accel`` (n, 3) or (3,): the acceleration of free flight;
     ``exclude`` (n,) bool: vertices that never get a contact (pins, contacts
-    released in this attempt); ``persistent`` (k, n) bool: the contacts of the
-    last step, kept (without pulling) while their predicted end stays within
-    ``band`` (k, n) above d; ``forced`` (k, n) bool: contacts an earlier solve
+    released in this attempt); ``persistent`` (k, n) bool or None: what
+    touched each body at the end of the last step, kept (without pulling)
+    while the predicted end stays within ``band`` (k, n) above d; ``forced`` (k, n) bool: contacts an earlier solve
     of the attempt missed, which land at d whatever the prediction."""
     k, n = phis.shape
     if k == 0 or n == 0:

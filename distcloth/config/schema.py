@@ -191,6 +191,17 @@ class MaterialSpec:
 
 
 @dataclass(frozen=True)
+class StartNoiseSpec:
+    """A seeded random displacement of the start positions along the rest
+    shape's normals (the rest shape itself is unchanged): a perfectly flat,
+    symmetric cloth pushed in its plane stays flat, as real cloth never does."""
+    amplitude: float = setting(0.0, doc="standard deviation of each vertex's displacement "
+                               "(0: none)", unit="m", at_least=0)
+    seed: int = setting(0, doc="random seed: the same seed gives the same start on any "
+                        "number of ranks", at_least=0)
+
+
+@dataclass(frozen=True)
 class ClothSpec:
     """One piece of cloth."""
     name: str = setting(doc="unique among the pieces", auto="piece{index}")
@@ -200,6 +211,8 @@ class ClothSpec:
     material: MaterialSpec = section(MaterialSpec, doc="the material")
     thickness: float = setting(0.001, doc="contact offset of the cloth against colliders and "
                                "itself", unit="m", at_least=0)
+    start_noise: StartNoiseSpec = section(StartNoiseSpec, doc="out-of-plane noise of the start "
+                                          "positions")
 
 
 @dataclass(frozen=True)

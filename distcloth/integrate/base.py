@@ -44,5 +44,7 @@ class Integrator:
     def __init__(self, cfg):
         self.cfg = cfg
 
-    def step(self, ctx, state, h: float, cons) -> StepResult:
+    def step(self, ctx, state, h: float, cons, guess=None) -> StepResult:
+        """``guess``: a velocity change (owned rows) to start the first solve from,
+        when the step is solved again with revised contacts (implicit schemes)."""
         raise NotImplementedError

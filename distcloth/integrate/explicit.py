@@ -39,7 +39,7 @@ class SymplecticEuler(Integrator):
     implicit = False
     stability_factor = 2.0
 
-    def step(self, ctx, state, h, cons):
+    def step(self, ctx, state, h, cons, guess=None):
         n = ctx.n_owned
         f0 = ctx.forces(state.x, state.v, want_jac=False)
         a = accelerations(ctx, f0, cons, h)
@@ -52,7 +52,7 @@ class ExplicitMidpoint(Integrator):
     implicit = False
     stability_factor = 2.0
 
-    def step(self, ctx, state, h, cons):
+    def step(self, ctx, state, h, cons, guess=None):
         n = ctx.n_owned
         x0, v0 = state.x, state.v
         f0 = ctx.forces(x0, v0, want_jac=False)
@@ -68,7 +68,7 @@ class RK4(Integrator):
     implicit = False
     stability_factor = 2.0 * math.sqrt(2.0)
 
-    def step(self, ctx, state, h, cons):
+    def step(self, ctx, state, h, cons, guess=None):
         n = ctx.n_owned
         x0, v0 = state.x, state.v
         f0 = ctx.forces(x0, v0, want_jac=False)

@@ -52,7 +52,7 @@ class ImplicitScheme(Integrator):
         """What the state keeps of this step if it is committed (multistep schemes)."""
         return None
 
-    def step(self, ctx, state, h, cons):
+    def step(self, ctx, state, h, cons, guess=None):
         n = ctx.n_owned
         x0, v0 = state.x, state.v
         m = ctx.mass[:n, None]
@@ -63,7 +63,7 @@ class ImplicitScheme(Integrator):
         alpha, beta = aff.s * aff.a_x, aff.s * aff.a_v
         data = ctx.assemble(alpha=alpha, beta=beta)
         b = m * aff.d + aff.s * (f[:n] + kx[:n])
-        dv_owned, info = ctx.solve(data, b, cons)
+        dv_owned, info = ctx.solve(data, b, cons, guess)
         ksp_its, ksp_res = info.iterations, info.residual
         dv = ctx.local_array(dv_owned)
         reaction = info.reaction

@@ -37,13 +37,19 @@ def gershgorin_bound(pattern, stiffness: np.ndarray, mass_owned: np.ndarray) -> 
     return float(np.max(rowsum.max(axis=1) / mass_owned, initial=0.0))
 
 
-def solve_constrained(system, pattern, data: np.ndarray, rhs: np.ndarray, cons: Constraints):
+def solve_constrained(system, pattern, data: np.ndarray, rhs: np.ndarray, cons: Constraints,
+                      guess: np.ndarray | None = None):
     """dv on the owned rows solving A dv = rhs under the constraints (pre-filtered
-    CG: constraints.py), and the solve's information."""
+    CG: constraints.py), starting from the velocity change ``guess`` if given,
+    and the solve's information."""
     fdata, frhs = filter_system(pattern, data, rhs, cons)
     system.set_values(fdata)
-    y, info = system.solve(frhs)
     owned = cons.index < pattern.n_owned
+    y0 = None
+    if guess is not None:                 # the filtered unknown is dv - z
+        y0 = guess.copy()
+        y0[cons.index[owned]] -= cons.z[owned]
+    y, info = system.solve(frhs, y0)
     y[cons.index[owned]] += cons.z[owned]
     return y, info
 

@@ -116,14 +116,17 @@ class LinearSystem:
                 + (f", preconditioner rebuilt every {self.pc_rebuild_every} solves"
                    if self.pc_rebuild_every > 1 else ""))
 
-    def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, SolveInfo]:
+    def solve(self, rhs: np.ndarray, guess: np.ndarray | None = None) -> tuple[np.ndarray, SolveInfo]:
         """Solve A y = rhs for this rank's rows; raises SolverFailure on divergence
         (the reason is the same on every rank, so all ranks raise together).
-        With ``warm_start`` the previous solution is the initial guess."""
+        The initial guess is ``guess`` (n_owned, 3) if given, else with
+        ``warm_start`` the previous solution, else zero."""
         self.b.array[:] = rhs.ravel()
         self.ksp.getPC().setReusePreconditioner(self.solves % self.pc_rebuild_every != 0)
         self.solves += 1
-        if self.warm_start:
+        if guess is not None:
+            self.ksp.setInitialGuessNonzero(self._better_than_zero(guess))
+        elif self.warm_start:
             self.ksp.setInitialGuessNonzero(True)
         else:
             self.y.set(0.0)
@@ -139,6 +142,19 @@ class LinearSystem:
             raise SolverFailure(f"linear solve did not converge: {_reason_name(reason)} "
                                 f"after {its} iterations, true relative residual {res:.3g}")
         return self.y.array.reshape(-1, 3).copy(), SolveInfo(its, reason, res)
+
+    def _better_than_zero(self, guess: np.ndarray) -> bool:
+        """Put ``guess`` into y if its residual is below |b| (the solver's
+        tolerance is relative to |b|: a guess worse than zero, as where nearly
+        every row is constrained and b vanishes, would only trip its
+        divergence test); else zero y."""
+        self.y.array[:] = guess.ravel()
+        self.A.mult(self.y, self.r)
+        self.r.aypx(-1.0, self.b)
+        if self.r.norm() < self.b.norm():
+            return True
+        self.y.set(0.0)
+        return False
 
     def destroy(self):
         for obj in (self.ksp, self.A, self.b, self.y, self.r):

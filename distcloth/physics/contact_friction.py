@@ -21,12 +21,26 @@ Witkin 1998 §5 treat stuck contacts as constraints, this is its soft form):
     v*   = v - u + h f_other / m          free relative velocity (f_other: all other forces)
     N    = max(0, -n . f_other) + m max(0, -n . (v - u)) / h     pressing force + approach
     s    = |P v*| - mu N h / m           tangential speed left after a full Coulomb impulse
-    c    = mu N / max(s, V_STICK)
+    c    = min(mu N, m |P v*| / h) / max(s, V_STICK)
 
 For one vertex alone this is exact Coulomb friction: sliding (s > 0), the
 implicit step gives v_t = v*_t (1 - mu N h / (m |v*_t|)), the speed lost to a
-kinetic friction impulse mu N h; stuck (s <= 0), c is so large that the
-vertex creeps at most V_STICK * |f_t| / (mu N) < V_STICK.  The normal force
+kinetic friction impulse mu N h; stuck (s <= 0), the friction impulse is the
+one that stops v*_t (at most mu N h, inside the Coulomb cone) and the vertex
+creeps at most V_STICK.  The bound m |P v*| / h is what stopping needs.
+
+Bounded coefficients: c enters the matrix as h c P on the vertex's diagonal
+block.  With mu N / V_STICK alone, a stuck vertex pressed hard (an impact's
+approach impulse, a stretched cloth pulled over the shoulders) reached
+h c / m = 5e5 on the torso scene, and v* itself is inflated there: h f / m of
+a stiff, sharply bent patch is an explicit estimate (10-20 m/s) of a motion
+the implicit solve holds back.  Such rows make the system needlessly badly
+conditioned (the linear solve of an earlier contact rule ran out of CG
+iterations on that scene).  So h c / m <= DAMPING_MAX: a stuck vertex keeps
+at most 1 / DAMPING_MAX of its free slip per step (1e-4 of a 1 m/s slip),
+and capping c only weakens friction, so the force stays inside the Coulomb
+cone and passive.
+The normal force
 does not count the contact's position correction (d - phi) / h: inflated by
 it, friction held vertices at convex edges (the old stiction).
 """
@@ -40,6 +54,7 @@ from .base import ForceTerm
 # the tangential diagonal then grows by mu g h / V_STICK (about 250 at
 # mu = 0.5, h = 5 ms), which only helps CG's diagonal dominance
 V_STICK = 1.0e-4
+DAMPING_MAX = 1.0e4   # largest h c / m: friction damping relative to the vertex's mass term
 
 
 class ContactFrictionTerm(ForceTerm):
@@ -88,7 +103,8 @@ class ContactFrictionTerm(ForceTerm):
         vstar = vrel + h * f_other / m[:, None]
         speed = np.linalg.norm(np.einsum("nij,nj->ni", self.P, vstar), axis=1)
         slide = speed - mu * N * h / m
-        return mu * N / np.maximum(slide, V_STICK)
+        c = np.minimum(mu * N, m * speed / h) / np.maximum(slide, V_STICK)
+        return np.minimum(c, DAMPING_MAX * m / h)
 
     def force_at(self, v_rows):
         """The friction force of this step's contacts at their velocities ``v_rows``."""

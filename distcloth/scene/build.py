@@ -111,7 +111,30 @@ def build_model(cfg: SceneConfig) -> Model:
                  spring_stiffness=stiffness, spring_damping=damping,
                  spring_kind=kind.astype(np.int8), pinned=pinned.astype(np.int64),
                  slide_vertices=slide_index.astype(np.int64), slide_axes=slide_axis,
-                 pieces=infos, initial_positions=None)
+                 pieces=infos, initial_positions=_start_noise(cfg, infos, positions, triangles))
+
+
+def _start_noise(cfg: SceneConfig, infos, positions, triangles):
+    """Start positions moved along the rest normals by each piece's seeded noise
+    (``start_noise``), or None when no piece asks for it.  Drawn from the
+    global model, so every rank and any rank count get the same start."""
+    if not any(spec.start_noise.amplitude > 0 for spec in cfg.cloth):
+        return None
+    normals = np.zeros_like(positions)
+    corner = positions[triangles]
+    area_normal = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], area_normal)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    start = positions.copy()
+    for spec, info in zip(cfg.cloth, infos):
+        noise = spec.start_noise
+        if noise.amplitude > 0:
+            rows = slice(info.vertex_start, info.vertex_stop)
+            draw = np.random.default_rng(noise.seed).standard_normal(info.vertex_stop
+                                                                      - info.vertex_start)
+            start[rows] += noise.amplitude * draw[:, None] * normals[rows]
+    return start
 
 
 def _check_one_continuum_material(cfg: SceneConfig) -> None:
