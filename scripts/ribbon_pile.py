@@ -42,12 +42,18 @@ import argparse
 import json
 import sys
 
+import matplotlib
 import numpy as np
 import yaml
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
 from numba import njit
 
 from distcloth.collision import bvh as B
-from distcloth.collision.proximity import edge_edge_contacts, mesh_edges, vertex_face_contacts
+from distcloth.collision.proximity import (edge_edge_contacts, mesh_edges, point_triangle,
+                                          vertex_face_contacts)
 from distcloth.collision.traverse import cross_pairs, self_pairs
 from distcloth.collision.tritri import self_intersecting_pairs
 from distcloth.io.h5read import read_result
@@ -68,28 +74,17 @@ def main_axis(points_xy):
 
 def turning_points(p, tol):
     """Indices where the sequence ``p`` reverses direction by more than
-    ``tol`` (zigzag with hysteresis): each is a fold."""
-    turns = []
-    direction = 0
-    extreme_i, extreme = 0, p[0]
+    ``tol`` (a zigzag with hysteresis): each is a fold."""
+    turns, direction, extreme = [], 0, 0
     for i in range(1, len(p)):
-        if direction >= 0 and p[i] > extreme:
-            extreme_i, extreme = i, p[i]
-            if direction == 0 and p[i] - p[0] > tol:
-                direction = 1
-        elif direction <= 0 and p[i] < extreme:
-            extreme_i, extreme = i, p[i]
-            if direction == 0 and p[0] - p[i] > tol:
-                direction = -1
-        if direction == 1 and extreme - p[i] > tol:
-            turns.append(extreme_i)
-            direction, extreme_i, extreme = -1, i, p[i]
-        elif direction == -1 and p[i] - extreme > tol:
-            turns.append(extreme_i)
-            direction, extreme_i, extreme = 1, i, p[i]
-        elif direction == 0 and abs(p[i] - p[0]) > tol:
-            direction = 1 if p[i] > p[0] else -1
-            extreme_i, extreme = i, p[i]
+        if direction == 0:                       # not yet moved tol from the start
+            if abs(p[i] - p[0]) > tol:
+                direction, extreme = (1 if p[i] > p[0] else -1), i
+        elif (p[i] - p[extreme]) * direction > 0:
+            extreme = i                          # further the same way
+        elif (p[extreme] - p[i]) * direction > tol:
+            turns.append(extreme)                # back by more than tol: a fold
+            direction, extreme = -direction, i
     return turns
 
 
@@ -173,7 +168,8 @@ def energy_scale(res, cfg):
 # ------------------------------------------------------------------ picture
 @njit(cache=True)
 def _raster(sx, sy, sz, tri, color, img, depth):
-    """z-buffer: fill each screen triangle (pixel centres) with its colour."""
+    """z-buffer: fill each screen triangle (pixel centres), its corner colours
+    (T, 3, 3) interpolated (Gouraud)."""
     H, W = depth.shape
     for t in range(tri.shape[0]):
         i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
@@ -195,13 +191,42 @@ def _raster(sx, sy, sz, tri, color, img, depth):
                 if w0 < 0.0 or w1 < 0.0 or w2 < 0.0:
                     continue
                 # perspective-correct depth: interpolate 1/z
-                inv = w0 / sz[i] + w1 / sz[j] + w2 / sz[k]
-                z = 1.0 / inv
+                z = 1.0 / (w0 / sz[i] + w1 / sz[j] + w2 / sz[k])
                 if z < depth[py, px]:
                     depth[py, px] = z
-                    img[py, px, 0] = color[t, 0]
-                    img[py, px, 1] = color[t, 1]
-                    img[py, px, 2] = color[t, 2]
+                    for ch in range(3):
+                        img[py, px, ch] = (w0 * color[t, 0, ch] + w1 * color[t, 1, ch]
+                                           + w2 * color[t, 2, ch])
+
+
+@njit(cache=True)
+def _mesh_distance(x, tris, out):
+    """out[i] = min(out[i], distance of x[i] to the triangles (m, 3, 3))."""
+    for i in range(x.shape[0]):
+        for t in range(tris.shape[0]):
+            d = point_triangle(x[i], tris[t, 0], tris[t, 1], tris[t, 2])[0]
+            if d < out[i]:
+                out[i] = d
+
+
+def plane_of(quad):
+    """(point, unit normal) of a stored plane square (4 corners)."""
+    n = np.cross(quad[1] - quad[0], quad[3] - quad[0])
+    return quad[0], n / np.linalg.norm(n)
+
+
+def height_above_bodies(x, colliders):
+    """Each vertex's distance to the nearest collider surface (last frame):
+    the height of the cloth above its support, whatever the slope."""
+    out = np.full(x.shape[0], np.inf)
+    for body in colliders.values():
+        rows = body["positions"][-1]
+        if body["shape"] == "plane":
+            p, n = plane_of(rows)
+            out = np.minimum(out, np.abs((x - p) @ n))
+        else:
+            _mesh_distance(np.ascontiguousarray(x), np.ascontiguousarray(rows[body["triangles"]]), out)
+    return out
 
 
 def clip_to_box(polys, lo, hi):
@@ -228,9 +253,8 @@ def clip_to_box(polys, lo, hi):
 
 
 def subdivide(tris, max_edge):
-    """Split triangles (k, 3, 3) at edge midpoints until no edge exceeds max_edge
-    (large body faces otherwise fill the view with a few flat colours; the
-    split only serves the per-face shading, not the depth test)."""
+    """Split triangles (k, 3, 3) at edge midpoints until no edge exceeds
+    max_edge (a few large body faces would otherwise be shaded flat)."""
     for _ in range(12):
         e = np.linalg.norm(tris - np.roll(tris, 1, axis=1), axis=2).max(axis=1)
         big = e > max_edge
@@ -239,121 +263,159 @@ def subdivide(tris, max_edge):
         t = tris[big]
         a, b, c = t[:, 0], t[:, 1], t[:, 2]
         ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
-        new = np.concatenate([np.stack(s, axis=1) for s in
+        new = np.concatenate([np.stack(q, axis=1) for q in
                               ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
         tris = np.concatenate([tris[~big], new])
     return tris
 
 
-def render(cloth_x, cloth_tri, bodies, eye_dir, size=(1000, 1400), fov=28.0):
-    """RGB image (H, W, 3) of the cloth and bodies seen from ``eye_dir`` (unit,
-    from the target to the eye) at a distance that fits the cloth in the view."""
-    import matplotlib.cm as cm
-    H, W = size
-    lo, hi = cloth_x.min(axis=0), cloth_x.max(axis=0)
-    target = 0.5 * (lo + hi)
-    radius = 0.5 * np.linalg.norm(hi - lo)
-    dist = 1.1 * radius / np.tan(np.radians(fov / 2))
-    eye = target + dist * eye_dir
-    fwd = (target - eye) / np.linalg.norm(target - eye)
-    right = np.cross(fwd, [0.0, 0.0, 1.0]); right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
-    f = 0.5 * H / np.tan(np.radians(fov / 2))
-    light = np.array([0.3, -0.5, 0.8]); light /= np.linalg.norm(light)
-    head = -fwd    # a headlight share keeps faces turned from the key light readable
-
-    def shade(tris, rgb):
-        n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-        # two-sided: the side facing the eye
-        n *= np.where(n @ (-fwd) < 0, -1.0, 1.0)[:, None]
-        lam = 0.25 + 0.5 * np.clip(n @ light, 0, 1) + 0.35 * np.clip(n @ head, 0, 1)
-        return np.clip(rgb * lam[:, None], 0, 1)
-
-    zc = cloth_x[cloth_tri].mean(axis=1)[:, 2]
-    zlo, zhi = float(cloth_x[:, 2].min()), float(cloth_x[:, 2].max())
-    cmap = cm.get_cmap("viridis")
-    cloth_rgb = cmap((zc - zlo) / max(zhi - zlo, 1e-12))[:, :3]
-    cloth_tris = cloth_x[cloth_tri]
-    colors = [shade(cloth_tris, cloth_rgb)]
-    all_tris = [cloth_tris]
-    if len(bodies):
-        colors.append(shade(bodies, np.full((len(bodies), 3), 0.86)))
-        all_tris.append(bodies)
-    tris = np.concatenate(all_tris)
-    color = np.concatenate(colors)
-    pts = tris.reshape(-1, 3) - eye
-    cz = pts @ fwd
-    sx = W / 2 + f * (pts @ right) / np.maximum(cz, 1e-9)
-    sy = H / 2 - f * (pts @ up) / np.maximum(cz, 1e-9)
-    img = np.ones((H, W, 3))
-    depth = np.full((H, W), np.inf)
-    idx = np.arange(tris.shape[0] * 3, dtype=np.int64).reshape(-1, 3)
-    _raster(sx, sy, cz, idx, color, img, depth)
-    # dark outlines where the depth jumps: the edges of folds and layers
-    dz = np.zeros_like(depth)
-    finite = np.where(np.isfinite(depth), depth, 1e3 * dist)
-    dz[:, 1:] = np.maximum(dz[:, 1:], np.abs(np.diff(finite, axis=1)))
-    dz[1:, :] = np.maximum(dz[1:, :], np.abs(np.diff(finite, axis=0)))
-    img[dz > 0.004 * dist] *= 0.35
-    return img, (zlo, zhi), cmap
-
-
 def collider_triangles(colliders, lo, hi, max_edge):
-    """The colliders' last-frame triangles clipped to the box [lo, hi]."""
+    """The colliders' last-frame surfaces in the box [lo, hi]: meshes clipped
+    to it, planes as a square through the box (the stored square lies under
+    the cloth's start, which the cloth may have left)."""
     polys = []
+    centre, half = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
     for body in colliders.values():
-        x = body["positions"][-1]
-        polys += [list(x[t]) for t in body["triangles"]]
+        rows = body["positions"][-1]
+        if body["shape"] == "plane":
+            p, n = plane_of(rows)
+            c = centre - ((centre - p) @ n) * n
+            a = rows[1] - rows[0]
+            a /= np.linalg.norm(a)
+            b = np.cross(n, a)
+            polys.append([c + half * (sa * a + sb * b)
+                          for sa, sb in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+        else:
+            polys += [list(rows[t]) for t in body["triangles"]]
     tris = clip_to_box(polys, lo, hi)
     return subdivide(tris, max_edge) if len(tris) else tris
 
 
+def render(cloth_x, cloth_tri, cloth_rgb, bodies, eye_dir, frame_points, size, fov=30.0):
+    """RGB image (H, W, 3): cloth and bodies seen from ``eye_dir`` (unit, from
+    the target to the eye), perspective, framed on ``frame_points``; z-buffered,
+    Lambert plus a headlight, dark lines where the depth jumps (fold edges)."""
+    H, W = size
+    lo, hi = frame_points.min(axis=0), frame_points.max(axis=0)
+    target = 0.5 * (lo + hi)
+    radius = 0.5 * np.linalg.norm(hi - lo)
+    dist = 1.2 * radius / np.tan(np.radians(fov / 2))
+    eye = target + dist * eye_dir
+    fwd = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+
+    def camera(p):
+        q = p - eye
+        z = q @ fwd
+        return (q @ right) / np.maximum(z, 1e-9), (q @ up) / np.maximum(z, 1e-9), z
+
+    # focal length and centre that fit the framed points into 90 % of the image
+    u, v, _ = camera(frame_points)
+    f = 0.9 * min(W / max(np.ptp(u), 1e-12), H / max(np.ptp(v), 1e-12))
+    u0, v0 = 0.5 * (u.min() + u.max()), 0.5 * (v.min() + v.max())
+    light = np.array([0.3, -0.5, 0.8])
+    light /= np.linalg.norm(light)
+
+    def lambert(n):
+        return 0.3 + 0.45 * np.clip(n @ light, 0, 1) + 0.3 * np.clip(n @ (-fwd), 0, 1)
+
+    def face_normals(tris):
+        n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+
+    # cloth: vertex normals (area-weighted), each corner turned to the side of
+    # its face that faces the eye; corner colours = colour map x light
+    cloth_tris = cloth_x[cloth_tri]
+    fn = np.cross(cloth_tris[:, 1] - cloth_tris[:, 0], cloth_tris[:, 2] - cloth_tris[:, 0])
+    vn = np.zeros_like(cloth_x)
+    for c in range(3):
+        np.add.at(vn, cloth_tri[:, c], fn)
+    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
+    facing = np.where(fn @ (-fwd) < 0, -1.0, 1.0)
+    corner_n = vn[cloth_tri] * facing[:, None, None]
+    cloth_col = np.clip(cloth_rgb[cloth_tri] * lambert(corner_n)[..., None], 0, 1)
+    tris, color = [cloth_tris], [cloth_col]
+    if len(bodies):
+        n = face_normals(bodies)
+        n *= np.where(n @ (-fwd) < 0, -1.0, 1.0)[:, None]
+        col = np.clip(0.88 * lambert(n), 0, 1)
+        tris.append(bodies)
+        color.append(np.repeat(np.repeat(col[:, None, None], 3, axis=1), 3, axis=2))
+    tris, color = np.concatenate(tris), np.ascontiguousarray(np.concatenate(color))
+    u, v, z = camera(tris.reshape(-1, 3))
+    sx = W / 2 + f * (u - u0)
+    sy = H / 2 - f * (v - v0)
+    img = np.ones((H, W, 3))
+    depth = np.full((H, W), np.inf)
+    _raster(sx, sy, z, np.arange(tris.shape[0] * 3, dtype=np.int64).reshape(-1, 3), color, img, depth)
+    finite = np.where(np.isfinite(depth), depth, 1e3 * dist)
+    jump = np.zeros_like(depth)
+    jump[:, 1:] = np.abs(np.diff(finite, axis=1))
+    jump[1:, :] = np.maximum(jump[1:, :], np.abs(np.diff(finite, axis=0)))
+    # a jump of more than ~1.5 pixel footprints at that depth: an edge in front of a farther surface
+    img[jump > 1.5 * finite / f + 0.002 * dist] *= 0.3
+    return img
+
+
 def picture(path_png, x, tri, colliders, counts, xs, ys, where, summary):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import Normalize
+    height = 1e3 * height_above_bodies(x, colliders)
+    hmax = float(np.percentile(height, 99.5))
+    norm = Normalize(0.0, hmax)
+    cmap = matplotlib.colormaps["viridis"]
+    rgb = cmap(norm(height))[:, :3]         # per vertex
     lo, hi = x.min(axis=0), x.max(axis=0)
-    span = hi - lo
-    margin = 0.25 * span.max()
-    box_lo = lo - margin
-    box_hi = hi + margin
-    box_lo[2] = min(lo[2], 0.0) - 0.02
-    box_hi[2] = hi[2] + 0.02
-    bodies = collider_triangles(colliders, box_lo, box_hi, 0.05 * span.max())
-    # seen from the side of the pile's main axis, 30 degrees above
+    margin = 0.15 * float((hi - lo).max())
+    box_lo, box_hi = lo - margin, hi + margin
+    box_lo[2] = lo[2] - 0.3 * margin
+    bodies = collider_triangles(colliders, box_lo, box_hi, 0.04 * float((hi - lo).max()))
     axis = main_axis(x[:, :2])
     side = np.array([-axis[1], axis[0], 0.0])
-    if side @ np.array([1.0, -1.0, 0.0]) < 0:
+    if side @ np.array([1.0, 1.0, 0.0]) < 0:
         side = -side
-    eye = side * np.cos(np.radians(30)) + np.array([0.0, 0.0, np.sin(np.radians(30))])
-    eye += 0.35 * np.array([axis[0], axis[1], 0.0])
-    eye /= np.linalg.norm(eye)
-    img, (zlo, zhi), cmap = render(x, tri, bodies, eye)
-    fig, axes = plt.subplots(1, 2, figsize=(15, 6.2), gridspec_kw={"width_ratios": [1.45, 1]})
-    ax = axes[0]
-    ax.imshow(img)
+    along = np.array([axis[0], axis[1], 0.0])
+
+    def eye(elevation, turn):
+        e = np.cos(np.radians(elevation)) * (np.cos(np.radians(turn)) * side
+                                              + np.sin(np.radians(turn)) * along)
+        return e + np.array([0.0, 0.0, np.sin(np.radians(elevation))])
+
+    # the close-up: the cross-section of the pile through the thickest point,
+    # seen from the ribbon's side nearest to it, low: the cloth within 0.2 m of
+    # it along the pile's axis
+    if side[:2] @ (np.asarray(where) - 0.5 * (lo[:2] + hi[:2])) < 0:
+        side = -side
+    near = np.abs((x[:, :2] - np.asarray(where)) @ axis) < 0.2
+    fig = Figure(figsize=(16, 12))
+    FigureCanvasAgg(fig)
+    gs = fig.add_gridspec(2, 2, width_ratios=[1.6, 1], height_ratios=[1, 1])
+    ax = fig.add_subplot(gs[0, 0])
+    ax.imshow(render(x, tri, rgb, bodies, eye(32, 25), x, (620, 1000)))
     ax.set_axis_off()
-    ax.set_title("final frame: cloth coloured by height, colliders grey")
-    sm = plt.cm.ScalarMappable(norm=Normalize(1e3 * zlo, 1e3 * zhi), cmap=cmap)
-    fig.colorbar(sm, ax=ax, fraction=0.035, pad=0.01, label="height (mm)")
-    ax = axes[1]
+    ax.set_title("the whole ribbon at the end, colliders grey")
+    ax = fig.add_subplot(gs[1, :])
+    ax.imshow(render(x, tri, rgb, bodies, eye(14, -20), x[near], (680, 1500)))
+    ax.set_axis_off()
+    ax.set_title(f"close-up: 0.4 m of the pile around its thickest point ({int(counts.max())} "
+                 "layers, + on the map), from the side")
+    fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, fraction=0.02, pad=0.01,
+                 label="height above the bodies (mm)")
+    ax = fig.add_subplot(gs[0, 1])
     shown = np.where(counts > 0, counts, np.nan)
     m = ax.imshow(shown.T, origin="lower", extent=(xs[0], xs[-1], ys[0], ys[-1]),
                   cmap="magma_r", interpolation="nearest", vmin=0.5,
                   vmax=max(int(counts.max()), 1) + 0.5)
-    ax.plot([where[0]], [where[1]], "c+", ms=14, mew=2)
+    ax.plot([where[0]], [where[1]], "c+", ms=16, mew=2.5)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    ax.set_title("layers crossed by a vertical ray (+: the most)")
+    ax.set_title("layers crossed by a vertical ray")
     fig.colorbar(m, ax=ax, fraction=0.046, pad=0.02, label="layers",
                  ticks=range(1, int(counts.max()) + 1))
-    fig.suptitle(summary, fontsize=10)
+    fig.suptitle(summary, fontsize=11)
     fig.tight_layout()
-    fig.savefig(path_png, dpi=110)
-    plt.close(fig)
+    fig.savefig(path_png, dpi=100)
 
 
 # ------------------------------------------------------------------ main
@@ -394,6 +456,8 @@ def analyse(path, fold_min, ray_step):
         "max_layers_at_xy": [float(xs[i]), float(ys[j])],
         "max_layers_z_range_m": [float(zmin[i, j]), float(zmax[i, j])],
         "area_with_2plus_layers_m2": float((counts >= 2).sum() * ray_step ** 2),
+        "area_by_layers_cm2": {int(k): round(float(n * ray_step ** 2 * 1e4), 1)
+                               for k, n in enumerate(np.bincount(counts.ravel())) if k and n},
         "self_contacts_vf": int(len(vf.vertex)),
         "self_contacts_ee": int(len(ee.edge_a)),
         "self_contacts_below_half_thickness": int((vf.distance < 0.5 * thickness).sum()
@@ -432,7 +496,8 @@ def report(r):
         f"most layers on a vertical ray: {r['max_layers']} at x = {r['max_layers_at_xy'][0]:.3f}, "
         f"y = {r['max_layers_at_xy'][1]:.3f} m (z {1e3 * r['max_layers_z_range_m'][0]:.1f} to "
         f"{1e3 * r['max_layers_z_range_m'][1]:.1f} mm); 2 or more layers over "
-        f"{1e4 * r['area_with_2plus_layers_m2']:.0f} cm²",
+        f"{1e4 * r['area_with_2plus_layers_m2']:.0f} cm²; area (cm²) by layer count "
+        + ", ".join(f"{k}: {a:g}" for k, a in r["area_by_layers_cm2"].items()),
         f"self-contacts at the end (closer than {1e3 * r['thickness_m']:g} mm, no shared vertex): "
         f"{r['self_contacts_vf']} vertex-face, {r['self_contacts_ee']} edge-edge, "
         f"{r['self_contacts_below_half_thickness']} of them closer than half of it, the closest "

@@ -18,7 +18,9 @@ public command, one run at a time, and reports per resolution
   here from the frames, independently of the simulator (sphere centre
   (0, 0, 0.25), radius 0.25; floor z = 0; d = the cloth thickness, the
   colliders having none): > 0 is inside the offset surface, > 1 inside the
-  body;
+  body; frames are written after the position fail-safe, so beside it the
+  largest ``max_penetration`` diagnostic (what the solve left before the
+  fail-safe), also in d;
 * the total work of the contact constraints, of friction and of the
   position fail-safe over the run (diagnostics, J);
 * solves per step (``stage_calls/solve``: 1 when the first contact set was
@@ -36,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import time
@@ -118,6 +119,7 @@ def measure(path: Path, info: dict) -> dict:
         "S": float(scale), "rise_over_S": rise_max / scale, "rise_t": rise_t,
         "excess_over_S": float((E.max() - E[0]) / scale),
         "deepest_over_d": float(depth[f, v]), "deepest_t": float(res["time"][f]),
+        "solve_penetration_over_d": float(np.nanmax(diag["max_penetration"]) / d),
         "frames": int(res["frames_written"]),
         "contact_work": float(np.nansum(diag["contact_work"])),
         "friction_work": float(np.nansum(diag["friction_work"])),
@@ -131,19 +133,23 @@ def measure(path: Path, info: dict) -> dict:
 def table(rows: list[dict]) -> str:
     head = ("| N × N | vertices | outcome | energy rise after first contact (S) | "
             "largest excess over start (S) | deepest vertex, any frame (d) | "
+            "deepest before the fail-safe (d) | "
             "contact work (J) | friction work (J) | fail-safe work (J) | solves/step (mean, max) | "
             "largest strain | wall (s) |")
-    lines = [head, "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [head, "|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         if r["status"] == "completed":
             outcome = f"completed, {r['t_end']:.2f} s"
         else:
             outcome = (f"stopped at step {r['error_step']} (t = {r['t_end']:.3f} s): "
                        f"{r['error'].split(': ', 1)[-1] if r['error'] else r['status']}")
+        rise = (f"{r['rise_over_S']:.3g} (t = {r['rise_t']:.2f} s)" if r["rise_over_S"] > 0
+                else "0 (never rises)")
         lines.append(
-            f"| {r['n']} | {r['vertices']} | {outcome} | {r['rise_over_S']:.3g} "
-            f"(t = {r['rise_t']:.2f} s) | {r['excess_over_S']:.3g} | {r['deepest_over_d']:.3f} "
-            f"(t = {r['deepest_t']:.2f} s) | {r['contact_work']:.4g} | {r['friction_work']:.4g} | "
+            f"| {r['n']} | {r['vertices']} | {outcome} | {rise} "
+            f"| {r['excess_over_S']:.3g} | {r['deepest_over_d']:.2g} "
+            f"(t = {r['deepest_t']:.2f} s) | {r['solve_penetration_over_d']:.3f} | "
+            f"{r['contact_work']:.4g} | {r['friction_work']:.4g} | "
             f"{r['failsafe_work']:.4g} | {r['solves_mean']:.2f}, {r['solves_max']} | "
             f"{r['max_strain']:.3f} | {r['wall']:.0f} |")
     return "\n".join(lines)

@@ -433,7 +433,7 @@ class ReusedCandidates:
 
 
 def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
-            max_ccd_iterations=10, max_zone_iterations=100, repulsion_iterations=4,
+            max_ccd_iterations=10, max_zone_iterations=100, repulsion_iterations=16,
             sweeps=8, eta=None, margin=0.01, hits=collisions):
     """The Bridson et al. 2002 §3 pipeline on the average velocity u of a step:
 
@@ -441,6 +441,12 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
     2. up to ``max_ccd_iterations`` passes of ``ccd_impulses`` (new candidates
        every pass, since x1 moves);
     3. if hits remain, ``impact_zones`` until none remain.
+
+    ``repulsion_iterations``: Jacobi passes of the proximity impulses.  A
+    stack of layers resting on a body needs the body's push to travel up
+    through every layer: with 4 passes the piling ribbon's bottom layer
+    ended up to 0.82 of the contact offset inside its ramp's offset, with
+    16 at most 0.56 (tests/test_scene_penetration.py).
 
     ``hits``: the CCD narrow phase of every pass (``collisions``, or the
     distributed drop-in of ``DistributedCollisions.shared_hits``).

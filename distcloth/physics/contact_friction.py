@@ -22,12 +22,22 @@ Witkin 1998 §5 treat stuck contacts as constraints, this is its soft form):
     N    = max(0, -n . f_other) + m max(0, -n . (v - u)) / h     pressing force + approach
     s    = |P v*| - mu N h / m           tangential speed left after a full Coulomb impulse
     c    = min(mu N, m |P v*| / h) / max(s, V_STICK)
+    c   <= mu N / max(|P (v - u)| - mu N h / m, V_STICK)
 
 For one vertex alone this is exact Coulomb friction: sliding (s > 0), the
 implicit step gives v_t = v*_t (1 - mu N h / (m |v*_t|)), the speed lost to a
 kinetic friction impulse mu N h; stuck (s <= 0), the friction impulse is the
 one that stops v*_t (at most mu N h, inside the Coulomb cone) and the vertex
 creeps at most V_STICK.  The bound m |P v*| / h is what stopping needs.
+
+The second bound is what a lone vertex sliding at its start speed would
+get.  Where cloth wraps a convex edge, the bending and membrane forces on a
+vertex at the kink nearly cancel its velocity in the explicit estimate v*
+(|P v*| = 0.02 m/s for |v_t| = 0.15 m/s), so without it the vertex is
+classed as held while the implicit solve moves it on with the strip: a
+friction force of 1500 mu N, and a strip sliding over a box edge lost up to
+a quarter of its speed in a step (docs/collisions.md, "Friction at a convex
+edge").
 
 Bounded coefficients: c enters the matrix as h c P on the vertex's diagonal
 block.  With mu N / V_STICK alone, a stuck vertex pressed hard (an impact's
@@ -104,6 +114,11 @@ class ContactFrictionTerm(ForceTerm):
         speed = np.linalg.norm(np.einsum("nij,nj->ni", self.P, vstar), axis=1)
         slide = speed - mu * N * h / m
         c = np.minimum(mu * N, m * speed / h) / np.maximum(slide, V_STICK)
+        # a vertex already sliding at its start speed gets no more than a
+        # lone vertex sliding at that speed: at a convex kink the explicit
+        # v* nearly vanishes while the solve moves the vertex on with the cloth
+        start = np.linalg.norm(np.einsum("nij,nj->ni", self.P, vrel), axis=1)
+        c = np.minimum(c, mu * N / np.maximum(start - mu * N * h / m, V_STICK))
         return np.minimum(c, DAMPING_MAX * m / h)
 
     def force_at(self, v_rows):
