@@ -136,6 +136,10 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
         if traversal:
             log(comm, traversal)
+        if sim.limiter_unconverged_steps:
+            log(comm, f"warning: strain limiting did not reach its bound in "
+                      f"{sim.limiter_unconverged_steps} steps (strain_limiting.passes = "
+                      f"{cfg.strain_limiting.passes}; limited_strain in the diagnostics)")
         log(comm, f"{status} in {wall:.2f} s: {os.path.abspath(path)} "
                   f"(+ {os.path.splitext(os.path.basename(path))[0]}.xdmf for ParaView)")
     _previews(cfg, comm, path)

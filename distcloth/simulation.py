@@ -33,6 +33,7 @@ from .parallel.partition import build_layout, describe_partition
 from .pipeline import Pipeline
 from .stages import FORCE_STAGES, STEP_STAGES
 from .state import State
+from .strain_limiter import StrainLimiter
 from .step_context import StepContext
 
 DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_energy",
@@ -43,7 +44,7 @@ DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_e
                "impact_zone_vertices", "self_intersections", "traverse_wall",
                "traverse_busy_max", "traverse_busy_mean", "traverse_idle_mean", "traverse_tests",
                "tasks_created", "tasks_stolen", "steals_refused", "steal_messages",
-               "steal_latency_max")
+               "steal_latency_max", "limited_springs", "limiter_passes", "limited_strain")
 MAX_SPEED = 1.0e3   # m/s: beyond this a cloth simulation has blown up
 
 
@@ -80,6 +81,12 @@ class Simulation:
                                     np.concatenate([self.pinned_local, self.slide_local]),
                                     self.integrator.implicit)
         self.terms = self._build_terms(cfg, model, lay)
+        self.limiter = None
+        if cfg.has("strain_limiting"):
+            self.limiter = StrainLimiter(cfg.strain_limiting, cfg, model, lay, self.mass,
+                                         np.concatenate([self.pinned_local, self.slide_local]),
+                                         self.ghosts, comm)
+        self.limiter_unconverged_steps = 0
         self.pattern = BlockPattern(self.n_owned, self.n_local,
                                     [s for t in self.terms for s in t.stencils()])
         for t in self.terms:
@@ -148,6 +155,8 @@ class Simulation:
             bindings[name] = (term.evaluate if term else None, term is not None)
         if self.contact.has_bodies:   # only scenes that name colliders have the stages
             bindings["collision:bodies"] = (self.contact.detect, True)
+        if self.limiter is not None:
+            bindings["strain_limiting"] = (self.limiter.apply, True)
         if self.contact.has_response:
             bindings["collision:response"] = (self.contact.respond, True)
         return Pipeline.bind(bindings)
@@ -318,6 +327,7 @@ class Simulation:
             "rejected_steps": self.state.rejections,
             "newton_unconverged": self.state.newton_unconverged,
             **self.contact.diagnostics(result.contact_report),
+            **(self.limiter.diagnostics(result.limit_report) if self.limiter else {}),
         }
 
     def _output(self, writer):
@@ -390,7 +400,9 @@ class Simulation:
             revision = contact.revise(contacts, result, state.t + h, h, revision)
             if revision is None:
                 break
-        result.contact_report, result.touching = None, None
+        result.contact_report, result.touching, result.limit_report = None, None, None
+        if self.limiter is not None:
+            result.limit_report = pipe.run("strain_limiting", state, result, contacts, h)
         if contact.has_response:
             error = None
             try:
@@ -425,14 +437,28 @@ class Simulation:
         state.touching = result.touching
         state.acceleration = acceleration
         if not result.newton_converged:
-            if state.newton_unconverged == 0:
-                self.say(f"step {state.step}: Newton used all {result.newton_iterations} "
-                         f"iterations (residual {result.newton_residual:.3g} > "
-                         f"{self.cfg.time.newton_tolerance:g}); accepted, counted in "
-                         f"newton_unconverged (time.require_newton_convergence rejects)")
-            state.newton_unconverged += 1
+            state.newton_unconverged = self._counted(
+                state.newton_unconverged,
+                f"step {state.step}: Newton used all {result.newton_iterations} "
+                f"iterations (residual {result.newton_residual:.3g} > "
+                f"{self.cfg.time.newton_tolerance:g}); accepted, counted in "
+                f"newton_unconverged (time.require_newton_convergence rejects)")
         if self.energy_guard.wants_reference(state.t, state.energy_reference):
             state.energy_reference = self.energy_guard.reference(*result.energies)
+        report = result.limit_report
+        if report is not None and not report.converged:
+            self.limiter_unconverged_steps = self._counted(
+                self.limiter_unconverged_steps,
+                f"step {state.step}: warning: strain limiting left a spring at strain "
+                f"{report.strain:.4g}, {report.excess:.3g} above its bound, after "
+                f"{report.passes} passes (strain_limiting.passes); later steps like "
+                f"this are counted and reported at the end")
+
+    def _counted(self, count: int, message: str) -> int:
+        """One more step of a kind the log names only the first time."""
+        if count == 0:
+            self.say(message)
+        return count + 1
 
     def _check_state(self):
         """Health check of the tentative state (two reductions): NaN, speed

@@ -15,7 +15,7 @@ A step of size h from the committed state (x, v) at time t:
   as often as it needs them (once per Newton iteration, four times per RK4
   step); with body contacts the attempt is solved again, at most three times,
   when a free vertex ends up inside a body;
-* ``collision:response`` and ``update`` finish the attempt; the state is
+* ``strain_limiting``, ``collision:response`` and ``update`` finish the attempt; the state is
   then checked (NaN, speed, strain, energy) and committed or restored;
 * ``diagnostics`` and ``output`` report the committed step.
 """
@@ -68,6 +68,10 @@ STEP_STAGES: tuple[Stage, ...] = (
           "the owned rows' 3x3 blocks in the pattern built once"),
     Stage("solve", "implicit integrators", "A, right-hand side, constraints",
           "velocity change", "pre-filtered CG (or any PETSc KSP) on the constrained system"),
+    Stage("strain_limiting", "effect strain_limiting", "proposed x, v; contacts; pins",
+          "proposed x, v", "Provot's position correction or the velocity directional "
+          "modification of over-stretched springs, Jacobi passes with ghost exchanges",
+          effect="strain_limiting"),
     Stage("collision:response", "colliders or self_collision",
           "proposed x, v; contacts; start forces; constraint impulses",
           "proposed x, v; the work of contacts, friction, fail-safe, impulses",

@@ -18,6 +18,7 @@ import pytest
 from scipy.spatial import Delaunay
 
 from distcloth.study import metrics, sweep
+from distcloth.config.load import apply_overrides
 from distcloth.study.accuracy import analyse
 
 G = 9.81
@@ -266,6 +267,29 @@ def test_alone_axes_compare_with_the_base_scene():
     # no product variant is the base scene: it is added
     plan = sweep.plan(raw, {}, alone=sweep.parse_vary(["pc=jacobi"]))
     assert [v.label() for v in plan] == ["base scene", "pc=jacobi", "reference", "noise"]
+
+
+def test_limiter_and_combo_shorthands_expand_to_scene_keys():
+    raw = sweep.normalise_scene(square_scene(effects=("gravity", "membrane", "bending")))
+    assert sweep.expand(raw, "limiter", "velocity") == (
+        "effects=[gravity, membrane, bending, strain_limiting]", "strain_limiting.method=velocity")
+    assert sweep.expand(raw, "limiter", "off") == ("effects=[gravity, membrane, bending]",)
+    with pytest.raises(ValueError, match="limiter=pbd"):
+        sweep.expand(raw, "limiter", "pbd")
+    # one variant, several keys, shorthands inside; its values may hold commas
+    combo = "cloth.0.material.stretch=10;limiter=provot;time.step=0.001;resolution=[5, 7]"
+    [value] = sweep.parse_vary([f"combo={combo}"])["combo"]
+    assert sweep.expand(raw, "combo", value) == (
+        "cloth.0.material.stretch=10", "effects=[gravity, membrane, bending, strain_limiting]",
+        "strain_limiting.method=provot", "time.step=0.001",
+        "cloth.0.mesh.grid.resolution=[5, 7]")
+    with pytest.raises(ValueError, match="combo="):
+        sweep.expand(raw, "combo", "time.step")
+    # the variants resolve to valid scenes
+    plan = sweep.plan(raw, {}, alone={"combo": [value]}, noise_floor=False)
+    resolved = apply_overrides(raw, plan[1].overrides)
+    assert resolved["strain_limiting"]["method"] == "provot"
+    assert resolved["cloth"][0]["material"]["stretch"] == 10
 
 
 def test_every_pc_value_maps_to_solver_options_that_run(dcomm, shared_tmp):

@@ -153,7 +153,7 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
     assert again == config
 
 
-THE_EFFECTS = "one of gravity | membrane | bending | damping | drag | collisions | self_collision"
+THE_EFFECTS = "one of gravity | membrane | bending | damping | drag | collisions | self_collision | strain_limiting"
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
              "newmark_gamma, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
              "require_newton_convergence")
@@ -191,12 +191,12 @@ ERRORS = [
     ("effects", ["gravity", "wind"], f"effects.1: 'wind' — {THE_EFFECTS}"),
     ("effects", ["drag", "drag"], "effects.1: 'drag' — each effect at most once"),
     ("effects", "gravity", "effects: 'gravity' — a list of effect names: gravity, membrane, "
-                           "bending, damping, drag, collisions, self_collision"),
+                           "bending, damping, drag, collisions, self_collision, strain_limiting"),
     ("time", {"stepp": 0.01},
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
                       "gravity, drag, time, solver, linear_system, output, drape, "
-                      "colliders, work_stealing"),
+                      "colliders, work_stealing, strain_limiting"),
     ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
     ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
     ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
@@ -263,6 +263,11 @@ ERRORS = [
     ("work_stealing", {"enabled": "yes"}, "work_stealing.enabled: 'yes' — true or false"),
     ("work_stealing", {"b": 0.5}, "work_stealing.b: 0.5 — a finite number >= 1"),
     ("work_stealing", {"chunk": 0}, "work_stealing.chunk: 0 — an integer >= 1"),
+    ("strain_limiting", {"method": "pbd"}, "strain_limiting.method: 'pbd' — one of provot | velocity"),
+    ("strain_limiting", {"weft": 0}, "strain_limiting.weft: 0 — a finite number > 0"),
+    ("strain_limiting", {"passes": 0}, "strain_limiting.passes: 0 — an integer >= 1"),
+    ("strain_limiting", {"rule": "average"},
+     "strain_limiting.rule: 'average' — only with method: velocity"),
 ]
 
 
@@ -306,7 +311,7 @@ OVERRIDE_ERRORS = [
     ("time.stepp=0.1", f"time.stepp: 0.1 — {TIME_ALLOWED}"),
     ("nosuch.key=1", "nosuch.key: 1 — no such key; allowed under the top level: scene, cloth, "
                      "effects, gravity, drag, time, solver, linear_system, output, drape, "
-                     "colliders, work_stealing"),
+                     "colliders, work_stealing, strain_limiting"),
     ("cloth.2.name=x", "cloth.2.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.first.name=x", "cloth.first.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.0.pins.0.edge=top", "cloth.0.pins.0.edge: 'top' — cloth.0.pins is not in the "
@@ -336,7 +341,7 @@ def test_bad_overrides_name_their_path(scene_dir, override, expected):
 
 
 NOT_A_MAPPING = ("null — a YAML mapping with keys scene, cloth, effects, gravity, drag, time, "
-                 "solver, linear_system, output, drape, colliders, work_stealing")
+                 "solver, linear_system, output, drape, colliders, work_stealing, strain_limiting")
 
 
 @pytest.mark.parametrize("text, expected", [

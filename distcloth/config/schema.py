@@ -13,7 +13,10 @@ from typing import Any
 from .describe import GIVEN, Only, choice, section, setting
 from .fabrics import FABRICS
 
-EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions", "self_collision")
+EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions", "self_collision",
+           "strain_limiting")
+LIMIT_METHODS = ("provot", "velocity")
+VELOCITY_RULES = ("average", "directional")
 COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box", "mesh")
 COLLIDER_METHODS = ("bvh", "image")   # mesh colliders: BVH closest points or image-space maps
 IMAGE_AXES = ("x", "y", "z")
@@ -57,6 +60,7 @@ FEM_ONLY = Only("model", "fem", "only with model: fem (mass_spring uses stretch,
 MESH_ONLY = Only("shape", "mesh", "only with shape: mesh")
 IMAGE_ONLY = Only("method", "image", "only with method: image")
 FILE_ONLY = Only("file", GIVEN, "only for file meshes")
+VELOCITY_ONLY = Only("method", "velocity", "only with method: velocity")
 
 Vec3 = tuple[float, float, float]
 
@@ -361,6 +365,36 @@ class DrapeSpec:
 
 
 @dataclass(frozen=True)
+class StrainLimitSpec:
+    """The strain_limiting effect (docs/strain_limiting.md): after each step
+    every structural and shear spring is brought back within its bound, the
+    largest engineering strain l / l0 - 1 it may have; pinned and contact
+    vertices never move."""
+    method: str = choice("provot", LIMIT_METHODS, doc="provot: position correction of "
+                         "over-stretched springs (Provot 1995); velocity: the velocity "
+                         "directional modification of Vassilev et al. 2001 §3")
+    rule: str = choice("average", VELOCITY_RULES, doc="velocity: average (Eq. 5 for every "
+                       "spring, the paper's rule for static bodies) or directional (Eq. 5 only "
+                       "for springs across the directional vector g dt + v_object, the rear end "
+                       "catching up with the front otherwise, the paper's rule for moving "
+                       "bodies; it cannot hold cloth hanging from pins: docs/strain_limiting.md)",
+                       only=VELOCITY_ONLY)
+    weft: float = setting(0.1, doc="bound of the springs along the weft (within 22.5 degrees "
+                          "of the piece's material.weft)", above=0)
+    warp: float = setting(0.1, doc="bound of the springs across it", above=0)
+    shear: float = setting(0.1, doc="bound of the shear (diagonal) springs", above=0)
+    passes: int = setting(200, doc="most Jacobi passes per step (each one neighbour exchange "
+                          "and one global reduction)", at_least=1)
+    tolerance: float = setting(1.0e-3, doc="strain above the bound at which the passes stop "
+                               "(a warning when the last pass leaves more)", above=0)
+    over_relaxation: float = setting(
+        1.8, doc="factor on each pass's averaged correction (1: plain Jacobi); when the "
+        "over-relaxed passes do not reach the bound the step's limiting starts again "
+        "without it (docs/strain_limiting.md); the directional rule always takes 1",
+        at_least=1, at_most=1.95)
+
+
+@dataclass(frozen=True)
 class StealSpec:
     """Load balance of the collision BVH traversal (EG07 tutorial, Part 1
     §5.8.2; distcloth/parallel/steal.py), used only when a mesh collider (bvh)
@@ -411,6 +445,8 @@ class SceneConfig:
                                                   what="colliders, each a mapping with name "
                                                   "and shape")
     work_stealing: StealSpec = section(StealSpec, doc="load balance of the collision traversal")
+    strain_limiting: StrainLimitSpec = section(StrainLimitSpec, doc="the strain_limiting "
+                                               "effect's bounds and method")
     source_text: str = setting("", doc="the resolved configuration as YAML, for the output "
                                "file", internal=True)
 

@@ -32,7 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene YAML file")
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2",
                    help="an axis of the sweep: a scene key (time.step=0.02,0.01) or a shorthand: "
-                        "resolution=9,17 (every grid piece), pc=jacobi,bjacobi_sgs,sgs32,gamg,hypre")
+                        "resolution=9,17 (every grid piece), pc=jacobi,bjacobi_sgs,sgs32,gamg,hypre, "
+                        "limiter=off,provot,velocity (the strain_limiting effect), "
+                        "combo='k1=v1;k2=v2' (one variant setting several keys)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override the base scene for every run (reference included)")
     p.add_argument("--reference-set", action="append", default=[], metavar="KEY=VALUE",

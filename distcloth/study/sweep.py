@@ -7,6 +7,10 @@ brackets belong to the value), plus shorthands that expand to several keys:
 
   * ``resolution=9,17``     every grid piece's ``mesh.grid.resolution`` = [N, N]
   * ``pc=jacobi,bjacobi_sgs,sgs32,gamg,hypre``   the solver's preconditioner
+  * ``limiter=off,provot,velocity``   the strain_limiting effect and its method
+  * ``combo=key=v;key=v;...``   one variant that sets several keys (shorthands
+    included), e.g. soft springs, an explicit scheme at its own step and a
+    limiter together
 
 The reference is not one of the variants: the smallest step / 4, BDF-2 with
 Newton to 1e-10, ``ksp_rtol`` 1e-10 on the unpreconditioned residual, the
@@ -35,7 +39,8 @@ import yaml
 
 from ..config import ConfigError, format_config_error
 from ..config.load import apply_overrides, config_from_dict
-from ..config.schema import TimeSpec
+from ..config.describe import entry
+from ..config.schema import LIMIT_METHODS, SceneConfig, TimeSpec
 from ..io.console import Progress
 from ..io.h5read import read_attrs
 from ..linalg.presets import PRECONDITIONERS
@@ -141,6 +146,23 @@ def expand(raw: dict, axis: str, value: str) -> tuple[str, ...]:
         if not pieces:
             raise ValueError("resolution: the scene has no grid piece")
         return tuple(f"cloth.{i}.mesh.grid.resolution=[{res[0]}, {res[1]}]" for i in pieces)
+    if axis == "limiter":
+        if value not in ("off",) + LIMIT_METHODS:
+            raise ValueError(f"limiter={value}: one of off, {', '.join(LIMIT_METHODS)}")
+        effects = [e for e in (raw.get("effects") or entry(SceneConfig, "effects").default)
+                   if e != "strain_limiting"]
+        if value == "off":
+            return (f"effects=[{', '.join(effects)}]",)
+        return (f"effects=[{', '.join(effects + ['strain_limiting'])}]",
+                f"strain_limiting.method={value}")
+    if axis == "combo":
+        out: tuple[str, ...] = ()
+        for part in (p.strip() for p in value.split(";")):
+            key, eq, val = part.partition("=")
+            if not part or not eq or not key.strip() or key.strip() == "combo":
+                raise ValueError(f"combo={value}: key=value parts separated by ';'")
+            out += expand(raw, key.strip(), val.strip())
+        return out
     if axis == "pc":
         if value not in PC_PRESETS:
             raise ValueError(f"pc={value}: one of {', '.join(PC_PRESETS)}")
