@@ -2,7 +2,7 @@
 # Idempotent setup: Debian packages + the distcloth package in a venv with system site packages.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
-PKGS="openssh-client openmpi-bin libopenmpi-dev libmetis-dev libmetis5 petsc-dev python3-petsc4py python3-mpi4py python3-h5py-mpi python3-numpy python3-scipy python3-yaml python3-numba python3-pytest python3-matplotlib python3-venv python3-pip python3-setuptools"
+PKGS="openssh-client openmpi-bin libopenmpi-dev libmetis-dev libmetis5 petsc-dev python3-petsc4py python3-mpi4py python3-h5py-mpi python3-numpy python3-scipy python3-yaml python3-numba python3-pytest python3-matplotlib python3-gmsh python3-venv python3-pip python3-setuptools"
 missing=""
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
