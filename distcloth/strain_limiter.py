@@ -115,13 +115,11 @@ class StrainLimiter:
         inv_mass = np.where(fixed, 0.0, 1.0 / self.mass)
         x_start = x[:n].copy()
         done = False
-        for _ in range(self.spec.passes + 1):
-            excess = spring_strain(x, self.springs, self.rest) - self.bound
-            worst = self.comm.max(np.array([excess.max(initial=-np.inf)]))[0]
-            done = worst <= self.spec.tolerance
-            if done or _ == self.spec.passes:
+        for p in range(self.spec.passes + 1):
+            corr, count, _, worst = provot_pass(x, self.springs, self.rest, self.limit, inv_mass)
+            done = self.comm.max(np.array([worst]))[0] <= self.spec.tolerance
+            if done or p == self.spec.passes:
                 break
-            corr, count, _unused = provot_pass(x, self.springs, self.limit, inv_mass)
             x[:n] += omega * corr[:n] / np.maximum(count[:n], 1.0)[:, None]
             self.ghosts.update(x)
             report.passes += 1

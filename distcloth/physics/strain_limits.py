@@ -57,21 +57,25 @@ def _accumulate(n: int, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def provot_pass(x, springs, limit, inv_mass):
+def provot_pass(x, springs, rest, limit, inv_mass):
     """One Jacobi pass of Provot's correction.
 
-    ``limit`` (m,): the largest length (1 + bound) l0 of each spring;
-    ``inv_mass`` (n,): 0 for a vertex that must not move.  Returns
-    (correction sum (n, 3), number of corrections (n,), springs corrected)."""
+    ``rest`` (m,): rest lengths l0; ``limit`` (m,): the largest length
+    (1 + bound) l0 of each spring; ``inv_mass`` (n,): 0 for a vertex that
+    must not move.  Returns (correction sum (n, 3), number of corrections
+    (n,), springs corrected, the largest strain above its bound before the
+    pass, over every spring: the passes' stopping test, from the same
+    lengths)."""
     n = x.shape[0]
     i, j = springs[:, 0], springs[:, 1]
     d = x[j] - x[i]
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    worst = float(((length - limit) / rest).max(initial=-np.inf))
     wi, wj = inv_mass[i], inv_mass[j]
     w = wi + wj
     act = (length > limit) & (w > 0.0)
     if not np.any(act):
-        return np.zeros((n, 3)), np.zeros(n), 0
+        return np.zeros((n, 3)), np.zeros(n), 0, worst
     i, j, wi, wj, w = i[act], j[act], wi[act], wj[act], w[act]
     # the excess along the spring, shared by inverse mass: p1 moves towards p2
     step = ((length[act] - limit[act]) / length[act])[:, None] * d[act]
@@ -80,7 +84,7 @@ def provot_pass(x, springs, limit, inv_mass):
     moving = np.concatenate([wi, wj]) > 0.0
     corr = _accumulate(n, rows[moving], moves[moving])
     count = np.bincount(rows[moving], minlength=n).astype(np.float64)
-    return corr, count, int(act.sum())
+    return corr, count, int(act.sum()), worst
 
 
 def velocity_pass(x, v, springs, limit, mass, anchored, vdir, tolerance,
