@@ -50,9 +50,9 @@ iterations on that scene).  So h c / m <= DAMPING_MAX: a stuck vertex keeps
 at most 1 / DAMPING_MAX of its free slip per step (1e-4 of a 1 m/s slip),
 and capping c only weakens friction, so the force stays inside the Coulomb
 cone and passive.
-The normal force
-does not count the contact's position correction (d - phi) / h: inflated by
-it, friction held vertices at convex edges (the old stiction).
+
+The normal force does not count the contact's position correction
+(d - phi) / h: inflated by it, friction held vertices at convex edges.
 """
 from __future__ import annotations
 
