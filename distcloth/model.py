@@ -48,6 +48,22 @@ class Model:
     shell_jump_stencil: np.ndarray | None = None  # (ne, 12) neighbour pairs (curvature-jump penalty)
     slide_vertices: np.ndarray | None = None      # (ns,) vertices held only along an axis
     slide_axes: np.ndarray | None = None          # (ns, 3) unit axes
+    # garments (distcloth/garment): what a mesh sewn from flat panels needs
+    triangle_weft: np.ndarray | None = None       # (nt, 3) each triangle's weft in the rest shape
+    triangle_scale: np.ndarray | None = None      # (nt,) membrane stiffness factor (fused layers)
+    rest_triangles: np.ndarray | None = None      # (nt, 3, 3) rest corners of each triangle: a
+    #   welded garment has no single rest shape (its panels are flat apart, not sewn together)
+    hinge_rest: np.ndarray | None = None          # (nh, 4, 3) each hinge unfolded flat at rest
+    hinge_scale: np.ndarray | None = None         # (nh,) bending stiffness factor (seams, fused)
+    stitch_pairs: np.ndarray | None = None        # (k, 2) vertices a sewing phase pulls together
+    stitch_gap: np.ndarray | None = None          # (k,) their distance at the start
+    stitch_index: np.ndarray | None = None        # (k,) the pattern stitch of each pair
+    same_vertex: np.ndarray | None = None         # (n,) the vertex each one becomes when welded
+    seam_lines: np.ndarray | None = None          # (m, 2) welded seam edges (extra springs)
+    seam_rest_length: np.ndarray | None = None    # (m,) their rest lengths (shrinkage included)
+    seam_stiffness: np.ndarray | None = None      # (m,) N/m
+    pattern_vertex: np.ndarray | None = None      # (n_pattern,) simulated vertex of each
+    #   pattern vertex (identity before welding)
 
     @property
     def num_vertices(self) -> int:
@@ -78,6 +94,9 @@ class Model:
         # every element stencil couples all its vertex pairs: springs, triangles
         # (membrane elements) and hinges (bending elements)
         pairs = [self.spring_vertices]
+        for extra in (self.stitch_pairs, self.seam_lines):
+            if extra is not None:
+                pairs.append(extra)
         stencils = [self.triangles]
         if self.hinge_vertices is not None:
             stencils.append(self.hinge_vertices)

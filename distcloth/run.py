@@ -23,6 +23,7 @@ from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
 from .io.console import Progress, log
 from .io.h5writer import ResultWriter
 from .scene import build_model
+from .sew import garment_arrays, sew
 from .simulation import DIAGNOSTICS, Simulation, SimulationError
 from .stages import STAGES
 
@@ -60,7 +61,7 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
     return sim, 0
 
 
-def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
+def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None):
     """The run's result file, with what the run was and the colliders' surfaces,
     which every frame then records (collective)."""
     lay = sim.layout
@@ -79,7 +80,27 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs):
                         owned_input=lay.owned_input, part=lay.part, config_text=cfg.source_text,
                         attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names,
                         colliders=collider_surfaces(sim.contact.colliders,
-                                                    sim.model.rest_positions))
+                                                    sim.model.rest_positions),
+                        arrays=arrays)
+
+
+def sew_if_needed(sim, cfg, comm, path, *, force=False, quiet=False, cmdline_options=None,
+                  progress=True):
+    """A scene with stitches is sewn and welded first (sew.py); returns the
+    simulation to go on with and an exit code (1: the sewing failed)."""
+    if sim.model.stitch_pairs is None:
+        return sim, 0
+    try:
+        sim, figures = sew(sim, cfg, comm, path,
+                           lambda s, p, names, attrs: open_writer(s, cfg, comm, p, names, attrs),
+                           quiet=quiet, progress=progress, force=force,
+                           cmdline_options=cmdline_options)
+    except SimulationError as exc:
+        log(comm, f"stopped: {exc}")
+        return None, 1
+    log(comm, f"sewn in {figures['sewing_time']:g} s ({figures['sewing_steps']} steps), widest "
+              f"stitch {1e3 * figures['stitch_gap']:.2f} mm")
+    return sim, 0
 
 
 def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
@@ -90,7 +111,7 @@ def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
         # the step's row first, so the frame's flush carries it; the output
         # stage's time is charged to the following step's row
         times, calls = sim.pipeline.take_step_counters()
-        writer.write_step(k, sim.state.t, diag, times, calls)
+        writer.write_step(sim.state.step, sim.state.t, diag, times, calls)
         if k % every == 0 or k == n_steps:
             sim.pipeline.run("output", writer)
         if bar:
@@ -109,7 +130,12 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         return 0
     path = output or cfg.output.file
     h = cfg.time.step
-    n_steps = max(1, int(round(cfg.time.end / h)))
+    sim, code = sew_if_needed(sim, cfg, comm, path, force=force, quiet=quiet,
+                              cmdline_options=cmdline_options, progress=progress)
+    if code:
+        return code
+    # a sewn garment goes on from the time its sewing ended, to time.end
+    n_steps = max(0, max(1, int(round(cfg.time.end / h))) - sim.state.step)
     every = max(1, int(round(cfg.output.every / h)))
     bounds = sim.contact.image_error_bounds()
     image = {f"image_error_bound/{name}": list(bound) for name, bound in bounds.items()}
@@ -117,7 +143,8 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         log(comm, f"image-space collider {name}: x-y error bound (Vassilev et al. 2001 Eq. 14) "
                   f"{1e3 * du:.2f} x {1e3 * dv:.2f} mm")
     writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
-                         {"steps": n_steps, "output_every_steps": every, **image})
+                         {"steps": n_steps, "output_every_steps": every, **image},
+                         garment_arrays(sim.model))
     log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
     sim.pipeline.run("output", writer)
     sim.pipeline.take_step_counters()
@@ -157,9 +184,12 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
         return code
     spec = cfg.drape
     path = output or cfg.output.file
+    sim, code = sew_if_needed(sim, cfg, comm, path, quiet=quiet, cmdline_options=cmdline_options)
+    if code:
+        return code
     writer = open_writer(sim, cfg, comm, path, list(DRAPE_DIAGNOSTICS),
                          {"drape_method": spec.method, "drape_stop_on": spec.stop_on,
-                          "drape_tolerance": spec.tolerance})
+                          "drape_tolerance": spec.tolerance}, garment_arrays(sim.model))
     log(comm, f"draping ({spec.method}) into {os.path.abspath(path)}: residual tolerance "
               f"{spec.tolerance:g}, at most {spec.max_iterations} iterations")
     relax = Relaxation(sim, spec)

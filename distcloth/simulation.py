@@ -99,8 +99,13 @@ class Simulation:
         self.pipeline = self._build_pipeline()
         self.ctx = StepContext(self.n_owned, self.mass, self.terms, self.pipeline, self.ghosts, comm)
         tc = cfg.time
+        # stitch springs shortening do work on the garment: a sewing scene is
+        # driven until its seams are welded (the welded simulation is passive)
+        drive_end = self.contact.drive_end
+        if model.stitch_pairs is not None:
+            drive_end = max(drive_end, cfg.garment.sewing.max_duration)
         self.energy_guard = EnergyGuard(tc.max_energy_gain if tc.energy_guard else None,
-                                        self.contact.drive_end, gravity_scale(cfg, model))
+                                        drive_end, gravity_scale(cfg, model))
         self.h = cfg.time.step
         self._cmdline = cmdline_options or set()
         self._inserted_options: list[str] = []
@@ -132,7 +137,7 @@ class Simulation:
         friction in the solve comes from the contact model."""
         terms = []
         for stage in STEP_STAGES:
-            if stage.build is not None and cfg.has(stage.effect):
+            if stage.build is not None and (stage.effect is None or cfg.has(stage.effect)):
                 term = stage.build(cfg, model, lay)
                 if term is not None:
                     terms.append(term)
@@ -233,9 +238,14 @@ class Simulation:
                               f"integrator, or --force")
 
     # ---------------------------------------------------------------- stages
-    def _kinematics(self):
+    def _kinematics(self, t_end=None):
         """Prescribed velocities at the end of the step of the held vertices
-        (pins, then sliding pins): held pins are at rest."""
+        (pins, then sliding pins): held pins are at rest; and the rest lengths
+        of time-dependent terms (stitch springs) at the end of the step."""
+        if t_end is not None:
+            for term in self.terms:
+                if hasattr(term, "at_time"):
+                    term.at_time(t_end)
         return np.zeros((self.pinned_local.size + self.slide_local.size, 3))
 
     def constraints(self, target_velocity=None, contacts=None) -> Constraints:
@@ -305,6 +315,26 @@ class Simulation:
         g, e = self.comm.sum(np.array(self._local_potentials(self.state.x if x is None else x)))
         return float(g), float(e)
 
+    def largest_stitch_gap(self) -> float:
+        """The widest stitched pair over all ranks (0 without stitches)."""
+        local = max((t.largest_gap(self.state.x) for t in self.terms
+                     if hasattr(t, "largest_gap")), default=0.0)
+        return float(self.comm.max(np.array([local]))[0])
+
+    def stitch_gaps(self) -> np.ndarray:
+        """(k,) distance of every stitched pair of the model, in model order, on
+        every rank (a collective reduction of the owned first ends)."""
+        model = self.model
+        if model.stitch_pairs is None:
+            return np.zeros(0)
+        to_local = self.layout.input_to_local()
+        a, b = to_local[model.stitch_pairs[:, 0]], to_local[model.stitch_pairs[:, 1]]
+        mine = (a >= 0) & (a < self.n_owned) & (b >= 0)
+        gaps = np.zeros(model.stitch_pairs.shape[0])
+        x = self.state.x
+        gaps[mine] = np.linalg.norm(x[a[mine]] - x[b[mine]], axis=1)
+        return self.comm.max(gaps)
+
     def max_strain(self) -> float:
         """Largest engineering membrane strain of this rank's rows: structural
         springs, or the FE triangles' principal stretch - 1."""
@@ -373,7 +403,7 @@ class Simulation:
         committed (the state's time becomes ``t_end``), else (None, reason,
         fatal) with the state unchanged."""
         state, pipe, contact = self.state, self.pipeline, self.contact
-        target = pipe.run("kinematics")
+        target = pipe.run("kinematics", t_end)
         revision, contacts, result = None, None, None
         for _ in range(MAX_CONTACT_PASSES if contact.has_bodies else 1):
             if contact.has_bodies:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from .physics.sewing import build_seams, build_sewing
 from .physics.terms import build_bending, build_damping, build_drag, build_gravity, build_membrane
 
 
@@ -36,7 +37,8 @@ class Stage:
     reads: str
     writes: str
     doc: str
-    effect: str | None = None                 # the scene effect that turns it on
+    effect: str | None = None                 # the scene effect that turns it on (None: the
+    #                                           model alone decides, by what build returns)
     build: Callable | None = None             # force stages: (cfg, model, layout) -> term
 
 
@@ -54,8 +56,14 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage("force:membrane", "effect membrane", "x", "forces, stiffness blocks",
           "in-plane elasticity: structural and shear springs, or FE triangles",
           effect="membrane", build=build_membrane),
+    Stage("force:seams", "effect membrane on a welded garment", "x", "forces, stiffness blocks",
+          "the seam lines of a sewn garment: springs along its seams, shorter than the fabric "
+          "they join by the seam shrinkage", effect="membrane", build=build_seams),
     Stage("force:bending", "effect bending", "x", "forces, stiffness blocks",
           "flexion springs or hinge / shell bending", effect="bending", build=build_bending),
+    Stage("force:sewing", "a garment whose stitches are not yet welded", "x, t",
+          "forces, stiffness blocks", "stitch springs whose rest length goes from the start gap "
+          "to zero over the sewing duration", build=build_sewing),
     Stage("force:damping", "effect damping", "x, v", "forces, damping blocks",
           "damping along the springs", effect="damping", build=build_damping),
     Stage("force:drag", "effect drag with drag > 0", "v", "forces, damping blocks",

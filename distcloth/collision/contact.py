@@ -457,7 +457,7 @@ class ContactModel:
         g = det.geometry
         found = ReusedCandidates(det.candidates, self.thickness, CANDIDATE_SLACK * self.thickness)
         U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness,
-                            self.pipeline_friction, found, hits=det.shared_hits)
+                            self.pipeline_friction, found, hits=det.shared_hits, same=det.same)
         mine = self.owned_input
         dU = U2[mine] - U[mine]
         report.impulse_hits = float(sum(stats["ccd_hits"]))

@@ -59,18 +59,24 @@ _PINV_RCOND = 1e-12   # relative cut-off for singular zone inertias / affine fit
 
 # ------------------------------------------------------------------ candidates
 
-def clean_pairs(vf, ee, tri, edges, inv_mass):
+def clean_pairs(vf, ee, tri, edges, inv_mass, same=None):
     """Canonical candidate rows: vf sorted unique, ee as (ea < eb) sorted
     unique; rows whose primitives share a vertex or whose vertices are all
     kinematic are dropped (Bridson et al. 2002: adjacent primitives touch by construction;
-    collider-collider pairs need no response)."""
+    collider-collider pairs need no response).  ``same`` (n,): the vertex each
+    vertex will be welded into (stitched panels being sewn): vertices with the
+    same one count as shared, so a seam may close."""
     vf = unique_rows(np.asarray(vf, dtype=np.int64).reshape(-1, 2))
     ee = unique_rows(np.sort(np.asarray(ee, dtype=np.int64).reshape(-1, 2), axis=1))
     kin = np.asarray(inv_mass) == 0
     f = tri[vf[:, 1]]
-    keep = np.all(f != vf[:, :1], axis=1) & ~(kin[vf[:, 0]] & np.all(kin[f], axis=1))
     a, b = edges[ee[:, 0]], edges[ee[:, 1]]
-    keep_e = (np.all(a[:, :, None] != b[:, None, :], axis=(1, 2))
+    if same is not None:
+        vf_id, f_id, a_id, b_id = same[vf[:, :1]], same[f], same[a], same[b]
+    else:
+        vf_id, f_id, a_id, b_id = vf[:, :1], f, a, b
+    keep = np.all(f_id != vf_id, axis=1) & ~(kin[vf[:, 0]] & np.all(kin[f], axis=1))
+    keep_e = (np.all(a_id[:, :, None] != b_id[:, None, :], axis=(1, 2))
               & ~(np.all(kin[a], axis=1) & np.all(kin[b], axis=1)))
     return np.ascontiguousarray(vf[keep]), np.ascontiguousarray(ee[keep_e])
 
@@ -340,7 +346,7 @@ def rigidify(x0, u, inv_mass, idx, z):
 
 
 def impact_zones(x0, u, h, inv_mass, tri, edges, thickness, candidates, max_iterations=100,
-                 eta=None, parent=None, hits=collisions):
+                 eta=None, parent=None, hits=collisions, same=None):
     """Fail-safe (Bridson et al. 2002 §7.4): detect CCD hits on x0 -> x0 + h u, merge the
     vertices of every hitting pair into zones (union-find, merging with the
     zones of earlier iterations, or of ``parent`` if given), give every zone
@@ -366,7 +372,7 @@ def impact_zones(x0, u, h, inv_mass, tri, edges, thickness, candidates, max_iter
     while True:
         raw = candidates(x0, x0 + h * u)
         if raw is not raw_prev:
-            vf, ee = clean_pairs(*raw, tri, edges, inv_mass)
+            vf, ee = clean_pairs(*raw, tri, edges, inv_mass, same)
             vf_t, ee_t = vf, ee
         else:
             # same candidates as the last pass: a pair none of whose vertices
@@ -434,7 +440,7 @@ class ReusedCandidates:
 
 def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
             max_ccd_iterations=10, max_zone_iterations=100, repulsion_iterations=16,
-            sweeps=8, eta=None, margin=0.01, hits=collisions):
+            sweeps=8, eta=None, margin=0.01, hits=collisions, same=None):
     """The Bridson et al. 2002 §3 pipeline on the average velocity u of a step:
 
     1. proximity at x0 (pairs closer than ``thickness``) -> ``repulsion``;
@@ -449,14 +455,15 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
     16 at most 0.56 (tests/test_scene_penetration.py).
 
     ``hits``: the CCD narrow phase of every pass (``collisions``, or the
-    distributed drop-in of ``DistributedCollisions.shared_hits``).
+    distributed drop-in of ``DistributedCollisions.shared_hits``); ``same``:
+    see ``clean_pairs``.
 
     Returns (u_new, stats): proximity_pairs, ccd_hits (per pass), zones,
     zone_vertices, zone_iterations, remaining (CCD hits of u_new, 0 unless
     the zone iteration cap was hit)."""
     x0, u, inv_mass, tri, edges = _prep(x0, u, inv_mass, tri, edges)
     eta = 1e-3 * thickness if eta is None else eta
-    vf, ee = clean_pairs(*candidates(x0, x0), tri, edges, inv_mass)
+    vf, ee = clean_pairs(*candidates(x0, x0), tri, edges, inv_mass, same)
     pvf = vertex_face_contacts(x0, tri, vf, thickness)
     pee = edge_edge_contacts(x0, edges, ee, thickness)
     u = repulsion(x0, u, h, inv_mass, tri, edges, pvf, pee, thickness, friction, repulsion_iterations)
@@ -464,7 +471,7 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
              "zones": 0, "zone_vertices": 0, "zone_iterations": 0, "remaining": 0}
     n_hits = 1
     for _ in range(max_ccd_iterations):
-        vf, ee = clean_pairs(*candidates(x0, x0 + h * u), tri, edges, inv_mass)
+        vf, ee = clean_pairs(*candidates(x0, x0 + h * u), tri, edges, inv_mass, same)
         u, n_hits = ccd_impulses(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, eta, margin,
                                  sweeps, hits)
         stats["ccd_hits"].append(n_hits)
@@ -472,7 +479,7 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
             break
     if n_hits:
         u, zs = impact_zones(x0, u, h, inv_mass, tri, edges, thickness, candidates,
-                             max_zone_iterations, eta, hits=hits)
+                             max_zone_iterations, eta, hits=hits, same=same)
         zs.pop("parent")
         stats.update(zs)
     return u, stats

@@ -38,14 +38,24 @@ class Format:
 def read_mesh_file(value: Any, key: str, ctx: Any) -> str:
     """The absolute path of an existing OBJ or PLY file; relative paths are
     relative to the scene file, so a scene and its meshes move together."""
-    allowed = MESH_FILE_TEXT
+    return _existing_file(value, key, ctx, MESH_SUFFIXES, MESH_FILE_TEXT)
+
+
+def _existing_file(value: Any, key: str, ctx: Any, suffixes, allowed: str) -> str:
     path = read_str(value, key, allowed)
-    if not path.lower().endswith(MESH_SUFFIXES):
+    if not path.lower().endswith(suffixes):
         raise ConfigError(key, value, allowed)
     full = os.path.abspath(os.path.join(ctx.base_dir, os.path.expanduser(path)))
     if not os.path.isfile(full):
         raise ConfigError(key, value, f"{allowed} (not found: {full})")
     return full
+
+
+def read_pattern_file(value: Any, key: str, ctx: Any) -> str:
+    """The absolute path of an existing sewing pattern (GarmentCode
+    specification JSON, or the compact form in YAML or JSON), relative to
+    the scene file; its contents are checked when the scene is built."""
+    return _existing_file(value, key, ctx, PATTERN_SUFFIXES, PATTERN_FILE_TEXT)
 
 
 def read_mesh_files(value: Any, key: str, ctx: Any) -> tuple[str, ...]:
@@ -122,12 +132,16 @@ def _read_option_value(entry: Any, key: str) -> Any:
 
 
 MESH_FILE_TEXT = "an existing " + " or ".join(MESH_SUFFIXES) + " file"
+PATTERN_SUFFIXES = (".json", ".yaml", ".yml")
+PATTERN_FILE_TEXT = ("an existing sewing pattern file: " + ", ".join(PATTERN_SUFFIXES)
+                     + " (GarmentCode specification or the compact form)")
 OUTPUT_FILE_TEXT = "a file name ending in " + " or ".join(OUTPUT_SUFFIXES)
 CURVE_TEXT = "a list of [Green strain, stress N/m] pairs from [0, 0], both increasing"
 PETSC_OPTIONS_TEXT = "a mapping of PETSc options without '-' and prefix"
 
 FORMATS: dict[str, Format] = {
     "mesh_file": Format(read_mesh_file, MESH_FILE_TEXT),
+    "pattern_file": Format(read_pattern_file, PATTERN_FILE_TEXT),
     "mesh_files": Format(read_mesh_files, f"{MESH_FILE_TEXT}, or a non-empty list of them",
                          dump=_dump_mesh_files),
     "output_file": Format(read_output_file, OUTPUT_FILE_TEXT),

@@ -11,8 +11,8 @@ from .checks import join
 from .describe import entries, entry, needs
 from .fabrics import FABRICS
 from .schema import (FEM_ONLY, MESH_ONLY, OPTIONAL_SHAPE_KEYS, SHAPE_KEYS, ColliderGeometry,
-                     ColliderSpec, ConfigError, MaterialSpec, MotionSpec, PinSpec, SceneConfig,
-                     TimeSpec)
+                     ColliderSpec, ConfigError, FusedSpec, MaterialSpec, MeshSpec, MotionSpec,
+                     PinSpec, SceneConfig, SewingSpec, TimeSpec)
 from .walk import Context, Rules, read_field, required_text
 
 PER_TIME = ("translations", "rotations")     # MotionSpec keys with one entry per time
@@ -41,6 +41,57 @@ def _pin(pin: PinSpec, section: dict, key: str, ctx: Context) -> PinSpec:
         if any(a > b for a, b in zip(pin.box_min, pin.box_max)):
             raise ConfigError(join(key, "box"), section["box"], "min <= max in every component")
     return pin
+
+
+def _mesh(mesh: MeshSpec, section: dict, key: str, ctx: Context) -> MeshSpec:
+    """A pattern is placed by its own panels' placement (moved by translation),
+    not by the grid and file keys."""
+    if mesh.pattern is not None:
+        for name in ("center", "rotation"):
+            if section.get(name) is not None:
+                raise ConfigError(join(key, name), section[name],
+                                  "only for grid and file meshes: a pattern's panels are "
+                                  "placed by the pattern; move it with translation")
+    return mesh
+
+
+def _fused(fused: FusedSpec, section: dict, key: str, ctx: Context) -> FusedSpec:
+    box = (fused.box_min, fused.box_max)
+    if (box[0] is None) != (box[1] is None):
+        raise ConfigError(join(key, "box"), section.get("box"), "both min and max, or neither "
+                          "(the whole panel)")
+    if box[0] is not None and any(a > b for a, b in zip(*box)):
+        raise ConfigError(join(key, "box"), section["box"], "min <= max in every component")
+    return fused
+
+
+def _sewing(sewing: SewingSpec, section: dict, key: str, ctx: Context) -> SewingSpec:
+    if sewing.max_duration < sewing.duration:
+        raise ConfigError(join(key, "max_duration"), sewing.max_duration,
+                          f"a time >= sewing.duration ({sewing.duration:g} s)")
+    return sewing
+
+
+def _garment_pieces(config: SceneConfig) -> None:
+    """Fused regions name pattern pieces; pattern pieces need a bending model
+    a welded mesh can carry."""
+    pieces = {spec.name: spec for spec in config.cloth}
+    for i, fused in enumerate(config.garment.fused):
+        spec = pieces.get(fused.piece)
+        if spec is None or spec.mesh.pattern is None:
+            names = [p.name for p in config.cloth if p.mesh.pattern is not None]
+            raise ConfigError(f"garment.fused.{i}.piece", fused.piece,
+                              "the name of a pattern piece (" + (", ".join(names) or "none")
+                              + ")")
+        if spec.material.model != "fem":
+            raise ConfigError(f"garment.fused.{i}.piece", fused.piece,
+                              "a piece with material.model: fem (a fused region adds moduli "
+                              "to the continuum membrane)")
+    for p, spec in enumerate(config.cloth):
+        if spec.mesh.pattern is not None and spec.material.bending_kind.endswith("_shell"):
+            raise ConfigError(f"cloth.{p}.material.bending_model", spec.material.bending_kind,
+                              "dihedral or isometric for a pattern piece (shell stencils are "
+                              "not carried across a welded seam)")
 
 
 def _material_preset(section: dict, key: str, ctx: Context) -> dict:
@@ -164,6 +215,7 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
         raise ConfigError("effects", list(config.effects),
                           "the collisions effect needs at least one entry under colliders:")
     _unique_names(config.colliders, "colliders", "collider")
+    _garment_pieces(config)
     return config
 
 
@@ -178,6 +230,9 @@ def _unique_names(items: tuple[Any, ...], key: str, noun: str) -> None:
 
 RULES: dict[type, Rules] = {
     PinSpec: Rules(after=_pin),
+    MeshSpec: Rules(after=_mesh),
+    FusedSpec: Rules(after=_fused),
+    SewingSpec: Rules(after=_sewing),
     MaterialSpec: Rules(before=_material_preset, after=_material),
     ColliderSpec: Rules(before=_collider_keys, after=_collider),
     MotionSpec: Rules(before=_motion_per_time, after=_motion_zeros),

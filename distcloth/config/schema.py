@@ -60,6 +60,7 @@ FEM_ONLY = Only("model", "fem", "only with model: fem (mass_spring uses stretch,
 MESH_ONLY = Only("shape", "mesh", "only with shape: mesh")
 IMAGE_ONLY = Only("method", "image", "only with method: image")
 FILE_ONLY = Only("file", GIVEN, "only for file meshes")
+PATTERN_ONLY = Only("pattern", GIVEN, "only for pattern meshes")
 VELOCITY_ONLY = Only("method", "velocity", "only with method: velocity")
 
 Vec3 = tuple[float, float, float]
@@ -93,10 +94,24 @@ class MeshSpec:
     file: str | None = setting(None, doc="an OBJ or PLY (ASCII or binary little-endian) "
                                "triangle mesh; a relative path is relative to the scene file",
                                read="mesh_file", one_of="shape")
+    pattern: str | None = setting(None, doc="a sewing pattern: GarmentCode specification JSON "
+                                  "or the compact form (docs/garments.md); its panels are "
+                                  "meshed, placed by the pattern, sewn and welded; a relative "
+                                  "path is relative to the scene file", read="pattern_file",
+                                  one_of="shape")
     scale: float = setting(1.0, doc="scale factor of a file mesh", above=0, only=FILE_ONLY)
-    center: Vec3 = setting((0.0, 0.0, 0.0), doc="where the bounding-box centre goes", unit="m")
-    rotation: Vec3 = setting((0.0, 0.0, 0.0), doc="rotation about x, then y, then z, applied "
-                             "before the translation", unit="degrees")
+    edge_length: float = setting(0.02, doc="pattern: target edge length of the panel meshes",
+                                 unit="m", above=0, only=PATTERN_ONLY)
+    up_axis: str = choice("y", UP_AXES, doc="pattern: the pattern's up axis; y (GarmentCode's): "
+                          "turned +90 degrees about x like a y-up mesh collider, so that the "
+                          "garment fits a body read with up_axis: y", only=PATTERN_ONLY)
+    translation: Vec3 = setting((0.0, 0.0, 0.0), doc="pattern: added to every vertex after "
+                                "the pattern's own placement and up_axis", unit="m",
+                                only=PATTERN_ONLY)
+    center: Vec3 = setting((0.0, 0.0, 0.0), doc="grid and file: where the bounding-box centre "
+                           "goes", unit="m")
+    rotation: Vec3 = setting((0.0, 0.0, 0.0), doc="grid and file: rotation about x, then y, "
+                             "then z, applied before the translation", unit="degrees")
 
 
 @dataclass(frozen=True)
@@ -217,6 +232,8 @@ class ClothSpec:
                                "itself", unit="m", at_least=0)
     start_noise: StartNoiseSpec = section(StartNoiseSpec, doc="out-of-plane noise of the start "
                                           "positions")
+    layer: int = setting(0, doc="pattern pieces worn together: 0 innermost; a piece of layer k "
+                         "starts k * garment.layer_gap further out", at_least=0)
 
 
 @dataclass(frozen=True)
@@ -300,6 +317,81 @@ class ColliderSpec:
                                           at_least=8, at_most=8192, only=IMAGE_ONLY)
     axis: str = choice("z", IMAGE_AXES, doc="image-space projection axis", only=IMAGE_ONLY)
     motion: MotionSpec | None = setting(None, doc="rigid keyframes; null: at rest")
+
+
+@dataclass(frozen=True)
+class SewingSpec:
+    """The sewing phase of pattern pieces (docs/garments.md): a spring joins
+    every stitched pair of vertices, its rest length going from the pair's start
+    gap to zero over the duration; when every pair is within the tolerance the
+    stitches are welded and the run goes on with one connected garment."""
+    duration: float = setting(0.5, doc="time over which the stitch springs' rest lengths go "
+                              "to zero", unit="s", above=0)
+    stiffness: float = setting(2000.0, doc="stiffness of each stitch spring (a closed seam's gap is its load over this)", unit="N/m", above=0)
+    tolerance: float = setting(1.0e-3, doc="weld when every stitched pair is this close",
+                               unit="m", above=0)
+    gravity: float = setting(0.0, doc="fraction of gravity acting while the garment is sewn "
+                             "(an open garment would fall off the body before its seams close; "
+                             "its weight comes on at the weld)", at_least=0, at_most=1)
+    max_duration: float = setting(3.0, doc="the run stops with an error naming the widest "
+                                  "stitch if the seams have not closed by then; >= duration",
+                                  unit="s", above=0)
+
+
+@dataclass(frozen=True)
+class SeamSpec:
+    """What a sewn seam adds to the fabric along it (EG07 tutorial, Part 2 §1:
+    seams are stiffer than the fabric, and a seam sewn shorter than the fabric
+    it joins puckers it)."""
+    stretch: float = setting(1.0, doc="seam strip modulus as a multiple of the fabric's "
+                             "(springs along the welded seam edges; 0: none)", at_least=0)
+    width: float = setting(0.01, doc="width of the seam strip (seam allowance)", unit="m",
+                           above=0)
+    bending: float = setting(2.0, doc="bending stiffness of the hinges across a seam as a "
+                             "multiple of the fabric's", above=0)
+    shrinkage: float = setting(0.0, doc="the seam line's rest length shortened by this "
+                               "fraction (the tutorial's pucker: up to 0.05)", at_least=0,
+                               at_most=0.2)
+
+
+@dataclass(frozen=True)
+class FusedSpec:
+    """An interlining fused to a panel (or a box of it): the region's triangles
+    and vertices take the combined material, the fabric's plus the
+    interlining's (layers glued together act in parallel)."""
+    piece: str = setting(doc="the cloth piece (its name) whose pattern has the panel")
+    panel: str = setting(doc="the panel's name in the pattern")
+    box_min: tuple[float, float] | None = setting(None, key="box.min", doc="the region's low "
+                                                  "corner in the panel's 2D frame; null: the "
+                                                  "whole panel", unit="m",
+                                                  what="[x, y] in m")
+    box_max: tuple[float, float] | None = setting(None, key="box.max", doc="the region's high "
+                                                  "corner", unit="m", what="[x, y] in m")
+    stretch: float = setting(0.0, doc="the interlining's membrane modulus, added", unit="N/m",
+                             at_least=0)
+    bending: float = setting(0.0, doc="the interlining's bending stiffness, added", unit="N·m",
+                             at_least=0)
+    density: float = setting(0.0, doc="the interlining's areal density, added", unit="kg/m²",
+                             at_least=0)
+
+
+@dataclass(frozen=True)
+class GarmentSpec:
+    """Pattern pieces: sewing, seams, fused interlinings and layers
+    (docs/garments.md)."""
+    sewing: SewingSpec = section(SewingSpec, doc="the sewing phase")
+    seams: SeamSpec = section(SeamSpec, doc="the seams of the welded garment")
+    fused: tuple[FusedSpec, ...] = setting((), doc="interlinings fused to panels",
+                                           what="fused regions")
+    clearance: float = setting(0.01, doc="pre-positioning: a panel that starts inside a body "
+                               "mesh collider or closer to it than this is moved out along its "
+                               "outside normal until it is this far (0: the pattern's placement "
+                               "as it is)", unit="m", at_least=0)
+    layer_gap: float = setting(0.01, doc="a piece of layer k starts k times this further out, "
+                               "each panel moved along its outside normal", unit="m",
+                               at_least=0)
+    start_check: bool = setting(True, doc="refuse to start when a garment intersects a body "
+                                "mesh collider or itself (the offending elements are named)")
 
 
 @dataclass(frozen=True)
@@ -447,6 +539,8 @@ class SceneConfig:
     work_stealing: StealSpec = section(StealSpec, doc="load balance of the collision traversal")
     strain_limiting: StrainLimitSpec = section(StrainLimitSpec, doc="the strain_limiting "
                                                "effect's bounds and method")
+    garment: GarmentSpec = section(GarmentSpec, doc="sewing, seams, fused regions and layers "
+                                   "of pattern pieces")
     source_text: str = setting("", doc="the resolved configuration as YAML, for the output "
                                "file", internal=True)
 

@@ -74,7 +74,7 @@ from functools import cached_property
 import numpy as np
 import yaml
 
-from ..scene.placement import rotation_matrix
+from ..rotations import rotation_matrix
 from .curves import Bezier, CircularArc, Line, frozen_array
 
 

@@ -15,6 +15,10 @@ Layout (every array in *input* vertex order, whatever the partition)::
     /colliders/<name>/triangles       (m, 3) int64: a collider's surface
     /colliders/<name>/positions       (frames, nv, 3) float64 if it moves (row k
                                       at frame k's time), else (1, nv, 3)
+    /garment/pattern_vertex    (n_pattern,) int64: a sewn garment's simulated
+                               vertex of each pattern vertex (the panels' meshes
+                               in pattern order, before welding)
+    /garment/seam_lines        (m, 2) int64: its welded seam edges
     /colliders/<name> attributes: name (the scene's; '/' in it becomes '_' in
     the group name), shape (plane | sphere | capsule | box | mesh), moving
     root attributes: status ('running' | 'completed' | 'failed'), error,
@@ -226,7 +230,8 @@ class ResultWriter:
                  owned_input: np.ndarray, part: np.ndarray,
                  config_text: str, attrs: Mapping[str, Any],
                  stage_names: Sequence[str], diagnostic_names: Sequence[str],
-                 colliders: Sequence[Any] = (), step_buffer: int = DEFAULT_STEP_BUFFER):
+                 colliders: Sequence[Any] = (), step_buffer: int = DEFAULT_STEP_BUFFER,
+                 arrays: Mapping[str, np.ndarray] | None = None):
         self.path = os.path.abspath(os.fspath(path))
         self._comm = _SerialComm() if comm is None else comm
         self.rank, self.size = int(self._comm.rank), int(self._comm.size)
@@ -330,6 +335,12 @@ class ResultWriter:
         part_ds = f.create_dataset("partition/part", shape=(n,), dtype=np.int32)
         self._write_root(part_ds, part)
         f["partition"].attrs["ranks"] = np.int64(self.size)
+        for name, value in sorted((arrays or {}).items()):
+            # static arrays the run adds (a garment's vertex map), identical on every rank
+            value = np.ascontiguousarray(value)
+            ds = f.create_dataset(name, shape=value.shape, dtype=value.dtype)
+            if value.size:
+                self._write_root(ds, value)
         text = config_text.encode("utf-8")
         # Fixed-length string: parallel HDF5 1.10 cannot write variable-length data.
         cfg = f.create_dataset("config", shape=(), dtype=h5py.string_dtype("utf-8", max(1, len(text))))

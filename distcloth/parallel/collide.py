@@ -59,6 +59,8 @@ class DistributedCollisions:
         self.mpi = comm.mpi_comm
         self.geometry = geometry
         self.self_collision = bool(self_collision)
+        # the vertex each combined-space vertex is welded into (collision.impulses.clean_pairs)
+        self.same = None
         # who owns which cloth vertex, in all-gather order
         counts = np.array(self.mpi.allgather(int(layout.n_owned)), dtype=np.int64)
         self._counts = counts
@@ -197,6 +199,8 @@ class DistributedCollisions:
         g = self.geometry
         if tp.shape[0]:
             a, b = g.tri[tp[:, 0]], g.tri[tp[:, 1]]
+            if self.same is not None:      # stitched vertices count as one
+                a, b = self.same[a], self.same[b]
             shared = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
             tp = tp[~shared & (tp[:, 0] < g.n_cloth_tri) & (tp[:, 1] < g.n_cloth_tri)]
         hits = 0
@@ -226,4 +230,8 @@ def build_collisions(comm, model, layout, mesh_colliders=(), self_collision: boo
     geometry = CollisionGeometry(tri, model.num_vertices, owner, comm.size,
                                  [(c.n_vertices, c.triangles) for c in mesh_colliders],
                                  rest=np.concatenate(rest))
-    return DistributedCollisions(comm, layout, geometry, self_collision, **detector_options)
+    detector = DistributedCollisions(comm, layout, geometry, self_collision, **detector_options)
+    if model.same_vertex is not None:
+        detector.same = np.concatenate([model.same_vertex,
+                                        np.arange(model.num_vertices, geometry.n_vertices)])
+    return detector

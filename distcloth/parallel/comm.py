@@ -62,6 +62,24 @@ class Comm:
         """Every rank's Python object, in rank order, on every rank."""
         return self.mpi_comm.allgather(obj)
 
+    def allgather_rows(self, owned_input: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
+        """(n, k) global array in input order from every rank's owned rows
+        (``owned_input``: their input indices) on every rank: for the one
+        moment the whole state must be known everywhere (a garment's weld
+        changes the topology and every rank builds the same new model)."""
+        rows = np.ascontiguousarray(rows, dtype=np.float64).reshape(len(owned_input), -1)
+        k = rows.shape[1]
+        counts = np.array(self.mpi_comm.allgather(int(rows.shape[0])), dtype=np.int64)
+        displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        index = np.empty(int(counts.sum()), dtype=np.int64)
+        self.mpi_comm.Allgatherv(np.ascontiguousarray(owned_input, dtype=np.int64),
+                                 [index, counts, displs, MPI.INT64_T])
+        values = np.empty((int(counts.sum()), k))
+        self.mpi_comm.Allgatherv(rows, [values, counts * k, displs * k, MPI.DOUBLE])
+        out = np.full((n, k), np.nan)
+        out[index] = values
+        return out
+
     def abort(self, code: int = 1):
         sys.stderr.flush()
         sys.stdout.flush()

@@ -534,12 +534,19 @@ def add_exact_dihedral_blocks(x, hinge, theta0, kb, alpha, slots, data):
 class _HingeTerm(ForceTerm):
     name = "force:bending"
 
-    def __init__(self, hinge, rest, stiffness, weight):
+    def __init__(self, hinge, rest, stiffness, weight, rest_points=None):
         self.hinges = np.ascontiguousarray(hinge, dtype=np.int64).reshape(-1, 4)
         ne = self.hinges.shape[0]
         self.B = _per_hinge(stiffness, ne)
         self.weight = _per_hinge(weight, ne)
-        self.rest_edge2, self.rest_area, self.kvec = hinge_rest_geometry(rest, self.hinges)
+        # rest_points (ne, 4, 3): each hinge's own rest points (a welded garment
+        # has no single rest shape, garment/weld.py); else rest[hinge]
+        self.rest_x, self.rest_stencil = np.asarray(rest, dtype=np.float64), self.hinges
+        if rest_points is not None:
+            self.rest_x = np.asarray(rest_points, dtype=np.float64).reshape(-1, 3)
+            self.rest_stencil = np.arange(4 * ne, dtype=np.int64).reshape(ne, 4)
+        self.rest_edge2, self.rest_area, self.kvec = hinge_rest_geometry(self.rest_x,
+                                                                         self.rest_stencil)
         self.kvec = np.ascontiguousarray(self.kvec)
         self.slots = None
 
@@ -558,10 +565,12 @@ class IsometricBendingTerm(_HingeTerm):
     the module docstring); ``rest_energy`` is the (weighted) energy of the
     rest shape, zero up to round-off when it is flat."""
 
-    def __init__(self, hinge, rest, stiffness, weight):
-        super().__init__(hinge, rest, stiffness, weight)
+    def __init__(self, hinge, rest, stiffness, weight, rest_points=None):
+        super().__init__(hinge, rest, stiffness, weight, rest_points)
         self.coef = np.ascontiguousarray(2.0 * C_HINGE * self.B / self.rest_area)
-        self.rest_energy = self.energy(np.asarray(rest, dtype=np.float64))
+        s = np.einsum("ha,hac->hc", self.kvec, self.rest_x[self.rest_stencil])
+        self.rest_energy = 0.5 * float(np.sum(self.coef * np.einsum("hc,hc->h", s, s)
+                                              * self.weight))
 
     def evaluate(self, x, v, force, want_jac):
         energy = isometric_forces(x, self.hinges, self.kvec, self.coef, self.weight, force)
@@ -595,15 +604,16 @@ class DihedralBendingTerm(_HingeTerm):
     ``add_to_system`` and ``stiffness_product`` instead of being stored
     (144 doubles per hinge would be)."""
 
-    def __init__(self, hinge, rest, stiffness, weight, rest_angle=None, hessian="gauss-newton"):
-        super().__init__(hinge, rest, stiffness, weight)
+    def __init__(self, hinge, rest, stiffness, weight, rest_angle=None, hessian="gauss-newton",
+                 rest_points=None):
+        super().__init__(hinge, rest, stiffness, weight, rest_points)
         if hessian not in ("gauss-newton", "exact"):
             raise ValueError(f"DihedralBendingTerm: unknown hessian {hessian!r}")
         self.hessian = hessian
         ne = self.hinges.shape[0]
         self.kb = np.ascontiguousarray(C_HINGE * self.B * self.rest_edge2 / self.rest_area)
         if rest_angle is None:
-            self.theta0 = np.ascontiguousarray(hinge_angles(rest, self.hinges))
+            self.theta0 = np.ascontiguousarray(hinge_angles(self.rest_x, self.rest_stencil))
         else:
             self.theta0 = _per_hinge(rest_angle, ne)
         self.grad = np.zeros((ne, 4, 3))

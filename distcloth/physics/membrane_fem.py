@@ -539,7 +539,7 @@ class MembraneFEMTerm(ForceTerm):
     name = "force:membrane"
 
     def __init__(self, triangles, rest_positions, weft, C, strain_model, weight,
-                 project=True, tables=None):
+                 project=True, tables=None, rest_corners=None, scale=None):
         if strain_model not in STRAIN_MODELS:
             raise ValueError(f"unknown strain model {strain_model!r}; "
                              f"choose from {sorted(STRAIN_MODELS)}")
@@ -560,7 +560,17 @@ class MembraneFEMTerm(ForceTerm):
             np.asarray(weight, dtype=np.float64), (self.tris.shape[0],)))
         self.project = bool(project)
         if self.tris.shape[0]:
-            self.G, self.Rg, self.area, self.frame = rest_frames(rest_positions, self.tris, weft)
+            # rest_corners (ne, 3, 3): each triangle's own rest corners (a welded
+            # garment has no single rest shape, garment/weld.py)
+            rest, stencil = rest_positions, self.tris
+            if rest_corners is not None:
+                rest = np.asarray(rest_corners, dtype=np.float64).reshape(-1, 3)
+                stencil = np.arange(rest.shape[0], dtype=np.int64).reshape(-1, 3)
+            self.G, self.Rg, self.area, self.frame = rest_frames(rest, stencil, weft)
+            if scale is not None:
+                # a fused interlining adds its stiffness: every term of the
+                # element's energy, force and Hessian is linear in its area
+                self.area = self.area * np.asarray(scale, dtype=np.float64)
         else:
             self.G, self.Rg = np.zeros((0, 3, 2)), np.zeros((0, 2, 2))
             self.area, self.frame = np.zeros(0), np.zeros((0, 3, 3))

@@ -149,7 +149,10 @@ class LocalSprings:
 def build_gravity(cfg, model, layout) -> ForceTerm:
     own = np.zeros(layout.n_local)
     own[: layout.n_owned] = 1.0
-    return GravityTerm(model.vertex_mass[layout.local_input], cfg.gravity, own)
+    gravity = np.asarray(cfg.gravity, dtype=np.float64)
+    if model.stitch_pairs is not None:     # a garment being sewn (sew.py)
+        gravity = gravity * cfg.garment.sewing.gravity
+    return GravityTerm(model.vertex_mass[layout.local_input], gravity, own)
 
 
 def build_membrane(cfg, model, layout) -> ForceTerm:
@@ -179,10 +182,14 @@ def build_drag(cfg, model, layout) -> ForceTerm | None:
 
 
 def _fem_membrane(model, layout, material):
-    tris, weight, _ = local_elements(model.triangles, layout)
     C = orthotropic_plane_stress(*material.orthotropic())
+    tris, weight, ids = local_elements(model.triangles, layout)
     weft = np.broadcast_to(np.asarray(material.weft, float), (tris.shape[0], 3))
+    if model.triangle_weft is not None:      # garments: each panel's grain
+        weft = model.triangle_weft[ids]
     rest = model.rest_positions[layout.local_input]
+    corners = None if model.rest_triangles is None else model.rest_triangles[ids]
+    scale = None if model.triangle_scale is None else model.triangle_scale[ids]
     tables = None
     if any(t is not None for t in (material.tension_weft, material.tension_warp, material.shear_curve)):
         # a missing curve keeps the linear law of EG07 tutorial Eq. 22 (its C11 / C22 / C33 slope)
@@ -190,7 +197,8 @@ def _fem_membrane(model, layout, material):
             return ((0.0, 0.0), (1.0, c))
         tables = (material.tension_weft or linear(C[0, 0]), material.tension_warp or linear(C[1, 1]),
                   material.shear_curve or linear(C[2, 2]))
-    return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables)
+    return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables,
+                           rest_corners=corners, scale=scale)
 
 
 def _hinge_bending(cfg, model, layout, kind):
@@ -212,5 +220,8 @@ def _hinge_bending(cfg, model, layout, kind):
         term = ShellDihedralBendingTerm if kind == "dihedral_shell" else ShellIsometricBendingTerm
         return term(local, model.shell_present[ids], rest, B, weight,
                     jump=(jump_local, jump_B, jump_weight, JUMP_GAMMA))
+    if model.hinge_scale is not None:        # seams and fused regions
+        B = B * model.hinge_scale[ids]
     term = DihedralBendingTerm if kind == "dihedral" else IsometricBendingTerm
-    return term(local, rest, B, weight)
+    points = None if model.hinge_rest is None else model.hinge_rest[ids]
+    return term(local, rest, B, weight, rest_points=points)

@@ -14,6 +14,8 @@ from . import grid as gridlib
 from .meshio import MeshFormatError, read_mesh
 from .pins import select_pin_axes, select_pins
 from .placement import place
+from .garment import (Garment, body_meshes, check_garment_start, garment_arrays,
+                      pattern_piece_of)
 from .springs import (check_triangle_mesh, flexion_stiffness, grid_spring_constants,
                       mesh_springs, mesh_structural_stiffness, triangle_areas)
 
@@ -33,6 +35,7 @@ class _Piece:
     grid_resolution: tuple[int, int] | None
     slide_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     slide_axis: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    garment: Garment | None = None    # pattern pieces: grain, stitches, fused regions
 
 
 def build_model(cfg: SceneConfig) -> Model:
@@ -56,8 +59,11 @@ def build_model(cfg: SceneConfig) -> Model:
     _check_one_continuum_material(cfg)
     # continuum pieces keep their springs (unused by the fem terms) without the
     # flexion correction, which belongs to the mass-spring model only
-    pieces = [_build_piece(p, spec, bending_active and spec.material.model == "mass_spring")
-              for p, spec in enumerate(cfg.cloth)]
+    garments = any(spec.mesh.pattern is not None for spec in cfg.cloth)
+    bodies = (body_meshes(cfg) if garments and (cfg.garment.clearance > 0
+                                                or cfg.garment.start_check) else [])
+    pieces = [_build_piece(p, spec, bending_active and spec.material.model == "mass_spring", cfg,
+                           bodies) for p, spec in enumerate(cfg.cloth)]
 
     infos, vertex_start, triangle_start = [], 0, 0
     for spec, piece in zip(cfg.cloth, pieces):
@@ -91,6 +97,10 @@ def build_model(cfg: SceneConfig) -> Model:
     vertex_mass = np.concatenate([spec.material.density * piece.vertex_area
                                   for spec, piece in zip(cfg.cloth, pieces)])
     rest_length = np.linalg.norm(positions[springs[:, 1]] - positions[springs[:, 0]], axis=1)
+    if any(piece.garment is not None for piece in pieces):
+        vertex_mass = vertex_mass + np.concatenate(
+            [piece.garment.added_mass if piece.garment is not None
+             else np.zeros(piece.positions.shape[0]) for piece in pieces])
 
     hinge_vertices = shell_stencil = shell_present = shell_jump = None
     kinds = {spec.material.bending_kind for spec in cfg.cloth}
@@ -103,7 +113,7 @@ def build_model(cfg: SceneConfig) -> Model:
     except ValueError as exc:
         raise ConfigError("cloth", "mesh", "hinge bending needs consistently oriented "
                           f"triangles: {exc}") from None
-    return Model(rest_positions=positions, triangles=triangles.astype(np.int64),
+    model = Model(rest_positions=positions, triangles=triangles.astype(np.int64),
                  hinge_vertices=hinge_vertices, shell_stencil=shell_stencil,
                  shell_present=shell_present, shell_jump_stencil=shell_jump,
                  vertex_mass=vertex_mass, vertex_area=vertex_area,
@@ -112,6 +122,11 @@ def build_model(cfg: SceneConfig) -> Model:
                  spring_kind=kind.astype(np.int8), pinned=pinned.astype(np.int64),
                  slide_vertices=slide_index.astype(np.int64), slide_axes=slide_axis,
                  pieces=infos, initial_positions=_start_noise(cfg, infos, positions, triangles))
+    if any(piece.garment is not None for piece in pieces):
+        garment_arrays(model, cfg, [piece.garment for piece in pieces], offsets)
+        if cfg.garment.start_check:
+            check_garment_start(cfg, model, bodies)
+    return model
 
 
 def _start_noise(cfg: SceneConfig, infos, positions, triangles):
@@ -152,13 +167,18 @@ def _check_one_continuum_material(cfg: SceneConfig) -> None:
                               "cloth.0.material: per-piece continuum laws are not supported yet")
 
 
-def _build_piece(p: int, spec: ClothSpec, bending_active: bool) -> _Piece:
+def _build_piece(p: int, spec: ClothSpec, bending_active: bool, cfg: SceneConfig,
+                 bodies=()) -> _Piece:
     key = f"cloth.{p}"
     mesh = spec.mesh
     if mesh.grid is not None:
         piece = _grid_piece(spec, bending_active, key)
     elif mesh.file is not None:
         piece = _file_piece(spec, key)
+    elif mesh.pattern is not None:
+        garment = pattern_piece_of(spec, p, cfg, bodies)
+        piece = _triangle_piece(spec, garment.positions, garment.triangles)
+        piece.garment = garment
     else:
         raise ConfigError(f"{key}.mesh", None, "exactly one of grid, file")
     piece.pinned = select_pins(spec.pins, piece.positions, piece.grid_resolution, f"{key}.pins")
@@ -213,14 +233,23 @@ def _file_piece(spec: ClothSpec, key: str) -> _Piece:
         vertices, triangles = read_mesh(mesh.file)
         vertices = vertices * mesh.scale
         check_triangle_mesh(vertices, triangles)
-        topology = mesh_springs(vertices, triangles)
+        topology = mesh_springs(vertices, triangles)     # refuses what springs cannot carry
     except OSError as exc:
         raise ConfigError(f"{key}.mesh.file", mesh.file,
                           f"a readable OBJ or PLY file ({exc.strerror or exc})") from None
     except MeshFormatError as exc:
         raise ConfigError(f"{key}.mesh.file", mesh.file,
                           f"an OBJ or PLY triangle mesh cloth can use: {exc}") from None
-    positions = place(vertices, mesh.rotation, mesh.center)
+    return _triangle_piece(spec, place(vertices, mesh.rotation, mesh.center), triangles,
+                           vertices, topology)
+
+
+def _triangle_piece(spec: ClothSpec, positions, triangles, vertices=None,
+                    topology=None) -> _Piece:
+    """Springs and lumped areas of a placed triangle mesh (``vertices``: its
+    unplaced rest shape, the same up to a rigid motion and scale)."""
+    vertices = positions if vertices is None else vertices
+    topology = mesh_springs(vertices, triangles) if topology is None else topology
     material = spec.material
     edge_length = np.linalg.norm(vertices[topology.edges[:, 1]] - vertices[topology.edges[:, 0]],
                                  axis=1)
