@@ -49,7 +49,7 @@ from .traverse import self_pairs, unique_rows
 
 
 @njit(cache=True)
-def _side(p, q, r, x):
+def plane_side(p, q, r, x):
     """((p - r) x (q - r)) . (x - r): > 0 if x is on the side of plane pqr
     its right-hand normal points to (orient3d up to sign convention)."""
     u0 = p[0] - r[0]; u1 = p[1] - r[1]; u2 = p[2] - r[2]
@@ -220,14 +220,14 @@ def tri_tri_intersect(p1, q1, r1, p2, q2, r2):
     other triangle's winding adjusted so that the alone vertex sees it
     positively); then the intervals the triangles cut on the line of the two
     planes overlap iff neither of two orientations is positive."""
-    dp1 = _side(p2, q2, r2, p1)
-    dq1 = _side(p2, q2, r2, q1)
-    dr1 = _side(p2, q2, r2, r1)
+    dp1 = plane_side(p2, q2, r2, p1)
+    dq1 = plane_side(p2, q2, r2, q1)
+    dr1 = plane_side(p2, q2, r2, r1)
     if (dp1 > 0.0 and dq1 > 0.0 and dr1 > 0.0) or (dp1 < 0.0 and dq1 < 0.0 and dr1 < 0.0):
         return False
-    dp2 = _side(p1, q1, r1, p2)
-    dq2 = _side(p1, q1, r1, q2)
-    dr2 = _side(p1, q1, r1, r2)
+    dp2 = plane_side(p1, q1, r1, p2)
+    dq2 = plane_side(p1, q1, r1, q2)
+    dr2 = plane_side(p1, q1, r1, r2)
     if (dp2 > 0.0 and dq2 > 0.0 and dr2 > 0.0) or (dp2 < 0.0 and dq2 < 0.0 and dr2 < 0.0):
         return False
     rot1, flip2 = _canonical_form(dp1, dq1, dr1)
@@ -248,9 +248,9 @@ def tri_tri_intersect(p1, q1, r1, p2, q2, r2):
     if flip1:                                   # T1 -> (a1, c1, b1)
         b1, c1 = c1, b1
     # CHECK_MIN_MAX(a1, b1, c1, a2, b2, c2)
-    if _side(a2, a1, b1, b2) > 0.0:
+    if plane_side(a2, a1, b1, b2) > 0.0:
         return False
-    if _side(a2, c1, a1, c2) > 0.0:
+    if plane_side(a2, c1, a1, c2) > 0.0:
         return False
     return True
 
@@ -261,8 +261,8 @@ def segment_triangle_intersect(a, b, p, q, r):
     plane iff a and b are not strictly on one side; the line ab meets the
     triangle iff the three volumes (a, b, edge) have no strictly opposite
     signs.  A segment lying in the plane is a 2D test."""
-    da = _side(p, q, r, a)
-    db = _side(p, q, r, b)
+    da = plane_side(p, q, r, a)
+    db = plane_side(p, q, r, b)
     if (da > 0.0 and db > 0.0) or (da < 0.0 and db < 0.0):
         return False
     if da == 0.0 and db == 0.0:
@@ -274,9 +274,9 @@ def segment_triangle_intersect(a, b, p, q, r):
         _project(T, axis, P)
         _project(S, axis, Q)
         return _polys2d_overlap(P, 3, Q, 2)
-    s1 = _side(a, b, p, q)
-    s2 = _side(a, b, q, r)
-    s3 = _side(a, b, r, p)
+    s1 = plane_side(a, b, p, q)
+    s2 = plane_side(a, b, q, r)
+    s3 = plane_side(a, b, r, p)
     return (s1 >= 0.0 and s2 >= 0.0 and s3 >= 0.0) or (s1 <= 0.0 and s2 <= 0.0 and s3 <= 0.0)
 
 

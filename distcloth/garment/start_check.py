@@ -51,14 +51,11 @@ from ..collision.bvh import build_bvh
 from ..collision.colliders import MeshCollider
 from ..collision.mesh_query import MeshProximity
 from ..collision.traverse import cross_pairs, self_pairs
-from ..collision.tritri import CROSSING_COPLANAR_TOL, tri_tri_batch
+from ..collision.tritri import CROSSING_COPLANAR_TOL, plane_side, tri_tri_batch
 
 __all__ = ["BodyIntersections", "ClosedMesh", "StartReport", "body_intersections",
            "boundary_edges", "check_start", "describe", "inside_closed_mesh",
            "self_intersections", "signed_distance_to_closed_mesh", "winding_number"]
-
-# Shewchuk's orient3d error bound factor (7 + 56 eps) eps, eps = 2^-53
-_O3D_BOUND = 7.771561172376103e-16
 
 # generic ray directions in the frame (u, v, w) of the mesh box, w its
 # thinnest axis (shortest rays, fewest boxes): near +-w with irrational-ish
@@ -101,16 +98,8 @@ def boundary_edges(triangles) -> np.ndarray:
 @njit(cache=True)
 def _orient(a, b, c, d):
     """((b - a) x (c - a)) . (d - a), or 0 when within Shewchuk's error bound
-    (the sign is then not certified)."""
-    u0 = b[0] - a[0]; u1 = b[1] - a[1]; u2 = b[2] - a[2]
-    v0 = c[0] - a[0]; v1 = c[1] - a[1]; v2 = c[2] - a[2]
-    w0 = d[0] - a[0]; w1 = d[1] - a[1]; w2 = d[2] - a[2]
-    det = (u1 * v2 - u2 * v1) * w0 + (u2 * v0 - u0 * v2) * w1 + (u0 * v1 - u1 * v0) * w2
-    perm = ((abs(u1 * v2) + abs(u2 * v1)) * abs(w0) + (abs(u2 * v0) + abs(u0 * v2)) * abs(w1)
-            + (abs(u0 * v1) + abs(u1 * v0)) * abs(w2))
-    if abs(det) <= _O3D_BOUND * perm:
-        return 0.0
-    return det
+    (the sign is then not certified): the triangle oracle's filtered orient3d."""
+    return plane_side(b, c, a, d)
 
 
 @njit(cache=True)

@@ -211,13 +211,12 @@ def _carry_hinge_scale(model: Model, new_of, hinge) -> np.ndarray:
         return lo * n + hi
 
     old_key = key(old)
+    if old_key.size == 0:
+        return np.ones(hinge.shape[0])
     order = np.argsort(old_key, kind="stable")
-    sorted_key = old_key[order]
     want = key(hinge)
-    at = np.minimum(np.searchsorted(sorted_key, want), max(sorted_key.size - 1, 0))
-    found = sorted_key.size > 0 and True
-    hit = (sorted_key[at] == want) if found else np.zeros(want.size, bool)
-    return np.where(hit, model.hinge_scale[order[at]] if found else 1.0, 1.0)
+    at = np.minimum(np.searchsorted(old_key[order], want), old_key.size - 1)
+    return np.where(old_key[order[at]] == want, model.hinge_scale[order[at]], 1.0)
 
 
 def _welded_pieces(model: Model, new_of, keep):

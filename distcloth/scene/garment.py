@@ -111,7 +111,8 @@ def _fused(cfg: SceneConfig, spec: ClothSpec, piece: PatternPiece, positions):
             centroid = pm.vertices[pm.triangles].mean(axis=1)
             lo, hi = np.asarray(fused.box_min), np.asarray(fused.box_max)
             local = np.all((centroid >= lo) & (centroid <= hi), axis=1)
-            inside = inside & np.isin(np.arange(nt), np.flatnonzero(inside)[local])
+            inside = np.zeros(nt, dtype=bool)
+            inside[np.flatnonzero(piece.triangle_panel == panel)[local]] = True
             if not local.any():
                 raise ConfigError(f"garment.fused.{i}.box", [list(lo), list(hi)],
                                   f"a box holding triangles of panel {fused.panel!r}")
