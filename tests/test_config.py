@@ -268,6 +268,14 @@ ERRORS = [
     ("strain_limiting", {"passes": 0}, "strain_limiting.passes: 0 — an integer >= 1"),
     ("strain_limiting", {"rule": "average"},
      "strain_limiting.rule: 'average' — only with method: velocity"),
+    ("cloth.0.material", {"model": "fem", "nu_weft": 0.3, "compression": 0.1},
+     "cloth.0.material.compression: 0.1 — a fraction >= sqrt(nu_weft * nu_warp) = 0.3 (the "
+     "Poisson coupling would make the energy fall under compression in both directions)"),
+    ("cloth.0.material", {"model": "fem", "strain": "corotated", "compression": 0.5},
+     "cloth.0.material.strain: 'corotated' — stvk with compression < 1 (the stiffness under "
+     "compression is a branch of the tabulated stvk law)"),
+    ("drape", {"criterion": "energy"},
+     "drape.criterion: 'energy' — one of force | motion"),
 ]
 
 

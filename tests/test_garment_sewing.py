@@ -187,3 +187,39 @@ def test_shrunk_seam_puckers_and_an_unshrunk_one_stays_flat(tmp_path, comm):
     assert waves[0.05][0] > 2e-3, waves
     assert waves[0.0][0] < 5e-4, waves
     assert np.isfinite(waves[0.05][1]) and waves[0.05][1] < 0.3, waves
+
+
+def test_friction_is_scaled_while_sewing_only(tmp_path, comm):
+    # panels slide into place while sewn (garment.sewing.friction of the
+    # colliders' mu), the welded garment meets the full mu
+    shared = comm.bcast(str(tmp_path), root=0)
+    from pathlib import Path
+    shared = Path(shared)
+    pattern = two_panels(shared) if comm.rank == 0 else shared / "two.yaml"
+    comm.barrier()
+    raw = scene(shared, pattern,
+                effects=["gravity", "membrane", "bending", "collisions"],
+                colliders=[{"name": "floor", "shape": "plane", "offset": -0.05,
+                            "normal": [0, 0, 1], "friction": 0.4}])
+    raw["garment"]["sewing"]["friction"] = 0.25
+    cfg = config_from_dict(raw, str(shared), "sewing.yaml")
+    model = build_model(cfg)
+    sim = Simulation(cfg, model, Comm(comm), quiet=True)
+    assert sim.contact.colliders[0].friction == pytest.approx(0.1, rel=1e-15)
+    sim.destroy()
+    model.stitch_pairs = None          # as the welded model has none
+    sim = Simulation(cfg, model, Comm(comm), quiet=True)
+    assert sim.contact.colliders[0].friction == 0.4
+    sim.destroy()
+
+
+def test_outer_layers_are_sewn_after_the_inner_ones():
+    # layer k's stitch ramp runs over [k d, (k + 1) d]: before it the pair keeps
+    # its start gap, after it the rest length is zero
+    from distcloth.physics.sewing import StitchTerm
+    term = StitchTerm(np.array([[0, 1], [2, 3]]), np.array([0.2, 0.4]), 1000.0, 0.5,
+                      np.ones(2), np.ones(2, dtype=bool), start=np.array([0.0, 0.5]))
+    for t, rest in ((0.0, [0.2, 0.4]), (0.25, [0.1, 0.4]), (0.5, [0.0, 0.4]),
+                    (0.75, [0.0, 0.2]), (1.0, [0.0, 0.0]), (2.0, [0.0, 0.0])):
+        term.at_time(t)
+        assert term.rest == pytest.approx(rest, abs=1e-15), t

@@ -642,6 +642,47 @@ def test_colliders_are_written_read_and_drawn(shared_dir):
     on_root(check)
 
 
+
+def test_views_of_a_body(shared_dir, monkeypatch):
+    """A file with a mesh collider (a body) gets ``_views.png``: the last frame
+    from the front and from the side, the body whole even two cloth sizes
+    above the cloth; analytic colliders alone get none."""
+    from distcloth.io import preview
+    syn = Synthetic(frames=3)
+    colliders, surfaces = scene_colliders()
+    last = syn.frames[-1]
+    top = last[:, 2].max() + 2.0 * float((last.max(axis=0) - last.min(axis=0)).max())
+    body = surfaces[-1]                                       # the mesh one
+    body.rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, top]])
+    dressed, bare = (os.path.join(shared_dir, f"{s}.h5") for s in ("dressed", "bare"))
+    with syn.writer(dressed, colliders=surfaces) as w:
+        syn.write_run(w)
+    with syn.writer(bare, colliders=surfaces[:2]) as w:       # a sphere and a floor
+        syn.write_run(w)
+    figures = {}
+
+    class Recording(preview.Figure):
+        def savefig(self, out, *args, **kwargs):
+            figures[os.path.basename(out)] = self
+            super().savefig(out, *args, **kwargs)
+
+    monkeypatch.setattr(preview, "Figure", Recording)
+
+    def check():
+        out = write_previews(dressed)
+        assert sorted(os.path.basename(p) for p in out) == [
+            "dressed_energy.png", "dressed_frames.png", "dressed_views.png"]
+        with open(os.path.join(shared_dir, "dressed_views.png"), "rb") as fh:
+            assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+        axes = figures["dressed_views.png"].axes
+        assert [(ax.get_title(), ax.azim) for ax in axes] == [("front", -90), ("side", 0)]
+        assert all(ax.get_zlim()[1] >= top - 1e-9 for ax in axes)
+        assert f"t = {syn.frame_time[-1]:.4g} s" in figures["dressed_views.png"]._suptitle.get_text()
+        out = write_previews(bare)
+        assert sorted(os.path.basename(p) for p in out) == ["bare_energy.png", "bare_frames.png"]
+
+    on_root(check)
+
 def test_preview_draws_the_colliders(tmp_path):
     """The frame picture with a collider differs from the one without, and a
     huge collider mesh is decimated to the budget."""

@@ -271,3 +271,58 @@ def test_rest_frame_weft_projection_and_fallback():
     with pytest.raises(ValueError):
         MembraneFEMTerm([[0, 1, 2]], X, None, material(), "neo", [1.0])
 
+
+
+def _linear_tables(C, compression):
+    from distcloth.physics.membrane_fem import with_compression
+    lin = [[[0.0, 0.0], [1.0, C[d, d]]] for d in range(3)]
+    return [with_compression(lin[0], compression), with_compression(lin[1], compression), lin[2]]
+
+
+def _one_triangle_stress(term, e_weft):
+    """Weft direct stress (N/m) of a unit right triangle stretched along x to
+    the Green strain e_weft, from the force on the free corner."""
+    X = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    stretch = np.sqrt(1.0 + 2.0 * e_weft)
+    x = X.copy()
+    x[1, 0] = stretch
+    f = np.zeros((3, 3))
+    term.evaluate(x, None, f, False)
+    # the first Piola stress P = F S: the corner force is P times the area-weighted
+    # normal of its opposite edge, so along x: f = -stretch S_xx * (1/2) * 1
+    return -f[1, 0] / (0.5 * stretch)
+
+
+def test_compression_branch_scales_compressive_stiffness_only():
+    C = orthotropic_plane_stress(20.0, 5.0, 0.0, 0.0, 3.0)   # no Poisson coupling: S_xx = C11 e
+    X = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    tris = np.array([[0, 1, 2]])
+    plain = MembraneFEMTerm(tris, X, None, C, "stvk", np.ones(1))
+    soft = MembraneFEMTerm(tris, X, None, C, "stvk", np.ones(1), tables=_linear_tables(C, 0.1))
+    for e in (0.02, 0.1):     # tension: untouched (the table is the linear law)
+        assert _one_triangle_stress(soft, e) == pytest.approx(_one_triangle_stress(plain, e),
+                                                              rel=1e-12)
+        assert _one_triangle_stress(plain, e) == pytest.approx(20.0 * e, rel=1e-12)
+    for e in (-0.01, -0.05):  # compression: a tenth of the stiffness
+        assert _one_triangle_stress(soft, e) == pytest.approx(0.1 * 20.0 * e, rel=1e-12)
+
+
+def test_compression_branch_forces_and_hessian_exact():
+    # the strongly deformed random elements of the exactness test cross e = 0 in
+    # both directions: the branch keeps the energy C1 and its Hessian exact
+    rng = np.random.default_rng(3)
+    X, tris, weft = curved_rest(rng)
+    n = X.shape[0]
+    x = X @ random_rotation(rng).T + 0.15 * rng.normal(size=X.shape)
+    C = material()
+    term = MembraneFEMTerm(tris, X, weft, C, "stvk", np.ones(len(tris)), project=False,
+                           tables=_linear_tables(C, 0.5))
+    f = force_fn(term, n)(x)
+    grad = fd_jacobian(lambda z: np.array([term.energy(z)]), x)[0]
+    assert np.abs(f.ravel() + grad).max() <= RTOL * np.abs(f).max()
+    J = fd_jacobian(force_fn(term, n), x)
+    term.evaluate(x, None, np.zeros((n, 3)), True)
+    A = dense_system(term, n, n, tris)
+    # the branch switch at e = 0 is a kink of the second derivative; no element
+    # strain of this state lies within the differencing step of it
+    assert np.abs(-A - J).max() <= RTOL * np.abs(J).max()

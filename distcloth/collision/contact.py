@@ -54,7 +54,8 @@ from .image_collider import ImageSpaceCollider
 from .imagespace import velocity_response
 from .impulses import ReusedCandidates, resolve
 from .mesh_query import MeshProximity
-from .response import Contacts, contact_constraint, detect, friction, normal_impulse, project
+from .response import (Contacts, contact_constraint, detect, friction, normal_impulse, project,
+                       unbalanced_force)
 
 MAX_CONTACT_PASSES = 4   # solves per attempt at most while the contact set changes
 MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
@@ -187,6 +188,9 @@ class ContactModel:
         self.self_collision = cfg.has("self_collision")
         collider_specs = cfg.colliders if cfg.has("collisions") else ()
         self.colliders = [make_collider(spec, implicit) for spec in collider_specs]
+        if model.stitch_pairs is not None:     # a garment being sewn (docs/garments.md)
+            for c in self.colliders:
+                c.friction *= cfg.garment.sewing.friction
         self.drive_end = max([c.drive_end for c in self.colliders] + [0.0])
         thick = np.zeros(model.num_vertices)
         for piece, spec in zip(model.pieces, cfg.cloth):
@@ -251,6 +255,24 @@ class ContactModel:
             maxd = margin if np.isscalar(margin) else float(np.max(margin[j], initial=0.0))
             phis[j], normals[j], vels[j] = c.query(x, t, maxd)
         return phis, normals, vels, offsets
+
+    def unbalanced(self, x, t, f):
+        """(n,) the part of the forces ``f`` on the first n = len(f) local
+        vertices at positions x that no body supports: a vertex within the
+        contact band of its deepest body (phi <= (1 + BAND_FRACTION) d) is
+        held against pushes into it and, by static friction, against
+        tangential forces inside its friction cone (response.unbalanced_force).
+        Local: no exchange."""
+        n = f.shape[0]
+        if not self.colliders:
+            return np.sqrt(np.einsum("ij,ij->i", f, f))
+        phis, normals, _, offsets = self.query(x[:n], t, (1.0 + BAND_FRACTION) * self.d_max)
+        gap = phis - offsets
+        deepest = np.argmin(gap, axis=0)
+        rows = np.arange(n)
+        touching = gap[deepest, rows] <= BAND_FRACTION * offsets[deepest, rows]
+        mu = np.array([c.friction for c in self.colliders])[deepest]
+        return unbalanced_force(f, touching, normals[deepest, rows], mu)
 
     # --------------------------------------------------- 2. detection
     def detect(self, state, h: float, revision: ContactRevision | None = None) -> Contacts:

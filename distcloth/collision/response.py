@@ -171,3 +171,16 @@ def project(x, v, phi, normal, vb, d) -> tuple[np.ndarray, np.ndarray, np.ndarra
         vn = np.einsum("ni,ni->n", v[inside] - vb[inside], n)
         v[inside] -= np.minimum(vn, 0.0)[:, None] * n
     return x, v, inside
+
+
+def unbalanced_force(f, touching, normal, mu):
+    """(n,) the part of the forces ``f`` (n, 3) that contacts cannot balance:
+    on a ``touching`` vertex with outward body ``normal`` and Coulomb ``mu``
+    the body supports any push into it (f.n <= 0) and static friction any
+    tangential force up to mu |f.n|, so what is left is the excess over the
+    friction cone; a pull away from the body and a free vertex keep |f|."""
+    mag = np.sqrt(np.einsum("ij,ij->i", f, f))
+    fn = np.einsum("ij,ij->i", f, normal)
+    ft = np.sqrt(np.maximum(mag * mag - fn * fn, 0.0))
+    pressed = touching & (fn <= 0.0)
+    return np.where(pressed, np.maximum(ft - mu * np.abs(fn), 0.0), mag)

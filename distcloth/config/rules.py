@@ -4,6 +4,7 @@ description (schema.py) and checked by walk.py.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import Any
 
@@ -87,6 +88,11 @@ def _garment_pieces(config: SceneConfig) -> None:
             raise ConfigError(f"garment.fused.{i}.piece", fused.piece,
                               "a piece with material.model: fem (a fused region adds moduli "
                               "to the continuum membrane)")
+        if fused.bending > 0 and spec.material.bending <= 0:
+            # the interlining's stiffness is a factor on the fabric's hinges
+            raise ConfigError(f"garment.fused.{i}.bending", fused.bending,
+                              f"0 when the fabric of piece {fused.piece!r} has no bending "
+                              "stiffness (the interlining scales the fabric's)")
     for p, spec in enumerate(config.cloth):
         if spec.mesh.pattern is not None and spec.material.bending_kind.endswith("_shell"):
             raise ConfigError(f"cloth.{p}.material.bending_model", spec.material.bending_kind,
@@ -130,6 +136,17 @@ def _material(material: MaterialSpec, section: dict, key: str, ctx: Context) -> 
     if material.strain != "stvk" and any(getattr(material, c) is not None for c in curves):
         raise ConfigError(join(key, "strain"), material.strain,
                           "stvk with " + " / ".join(curves) + " tables")
+    if material.strain != "stvk" and material.compression != 1.0:
+        raise ConfigError(join(key, "strain"), material.strain,
+                          "stvk with compression < 1 (the stiffness under compression is a "
+                          "branch of the tabulated stvk law)")
+    if material.compression < math.sqrt(nu_weft * nu_warp):
+        # with both directions compressed the energy's Hessian in (e_weft, e_warp)
+        # is [[c C11, C12], [C12, c C22]]: convex only for c^2 >= nu_weft nu_warp
+        raise ConfigError(join(key, "compression"), material.compression,
+                          f"a fraction >= sqrt(nu_weft * nu_warp) = "
+                          f"{math.sqrt(nu_weft * nu_warp):.4g} (the Poisson coupling would "
+                          "make the energy fall under compression in both directions)")
     return material
 
 

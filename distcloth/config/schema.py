@@ -37,7 +37,8 @@ STRAIN_MODELS = ("stvk", "corotated")
 BENDING_MODELS = ("flexion", "dihedral", "isometric", "dihedral_shell", "isometric_shell")
 MAT_TYPES = ("baij", "aij")
 DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
-DRAPE_STOP_ON = ("potential", "kinetic")
+DRAPE_STOP_ON = ("potential", "kinetic", "both")
+DRAPE_CRITERIA = ("force", "motion")
 MAX_NEWTON_ITERATIONS = 100
 
 # The prefix of distcloth's PETSc options (-distcloth_ksp_rtol), written once:
@@ -185,6 +186,11 @@ class MaterialSpec:
     shear_curve: tuple[tuple[float, float], ...] | None = setting(
         None, doc="strain: stvk only: shear stress against shear strain 2 E_uv (odd in the "
         "strain), as [[e, S], ...] like tension_weft", unit="N/m", read="curve", only=FEM_ONLY)
+    compression: float = setting(
+        1.0, doc="strain: stvk only: weft and warp stiffness under compression as a fraction of "
+        "the stiffness at the start of the tension curve (Choi and Ko 2002: woven cloth buckles "
+        "into fine wrinkles at a small fraction of its tensile load, wrinkles a coarse mesh "
+        "cannot show; 1: the linear law)", above=0, at_most=1, only=FEM_ONLY)
 
     def orthotropic(self) -> tuple[float, float, float, float, float]:
         """(E_weft, E_warp, nu_weft, nu_warp, G) with the defaults filled in."""
@@ -233,7 +239,8 @@ class ClothSpec:
     start_noise: StartNoiseSpec = section(StartNoiseSpec, doc="out-of-plane noise of the start "
                                           "positions")
     layer: int = setting(0, doc="pattern pieces worn together: 0 innermost; a piece of layer k "
-                         "starts k * garment.layer_gap further out", at_least=0)
+                         "starts k * garment.layer_gap further out and is sewn after the layers "
+                         "under it (from k * garment.sewing.duration on)", at_least=0)
 
 
 @dataclass(frozen=True)
@@ -326,13 +333,17 @@ class SewingSpec:
     gap to zero over the duration; when every pair is within the tolerance the
     stitches are welded and the run goes on with one connected garment."""
     duration: float = setting(0.5, doc="time over which the stitch springs' rest lengths go "
-                              "to zero", unit="s", above=0)
+                              "to zero (layer k's from k times this on)", unit="s", above=0)
     stiffness: float = setting(2000.0, doc="stiffness of each stitch spring (a closed seam's gap is its load over this)", unit="N/m", above=0)
     tolerance: float = setting(1.0e-3, doc="weld when every stitched pair is this close",
                                unit="m", above=0)
     gravity: float = setting(0.0, doc="fraction of gravity acting while the garment is sewn "
                              "(an open garment would fall off the body before its seams close; "
                              "its weight comes on at the weld)", at_least=0, at_most=1)
+    friction: float = setting(0.0, doc="fraction of the colliders' friction while the garment is "
+                              "sewn (panels slide around the body into place instead of being "
+                              "held where they first touch it; full friction from the weld)",
+                              at_least=0, at_most=1)
     max_duration: float = setting(3.0, doc="the run stops with an error naming the widest "
                                   "stitch if the seams have not closed by then; >= duration",
                                   unit="s", above=0)
@@ -367,9 +378,12 @@ class FusedSpec:
                                                   what="[x, y] in m")
     box_max: tuple[float, float] | None = setting(None, key="box.max", doc="the region's high "
                                                   "corner", unit="m", what="[x, y] in m")
-    stretch: float = setting(0.0, doc="the interlining's membrane modulus, added", unit="N/m",
+    stretch: float = setting(0.0, doc="the interlining's membrane modulus, added along the weft; the "
+                             "region's whole law is scaled by 1 + stretch / E_weft, so an "
+                             "orthotropic fabric keeps its ratios", unit="N/m",
                              at_least=0)
-    bending: float = setting(0.0, doc="the interlining's bending stiffness, added", unit="N·m",
+    bending: float = setting(0.0, doc="the interlining's bending stiffness, added (a factor on the "
+                             "fabric's: the fabric needs bending > 0)", unit="N·m",
                              at_least=0)
     density: float = setting(0.0, doc="the interlining's areal density, added", unit="kg/m²",
                              at_least=0)
@@ -449,9 +463,21 @@ class DrapeSpec:
                          "velocity zeroed at an energy extremum; dynamic, quasistatic, newton: "
                          "see docs/drape.md")
     stop_on: str = choice("potential", DRAPE_STOP_ON, doc="stop_and_go: zero the velocities at "
-                          "a potential-energy minimum, or at a kinetic-energy maximum")
-    tolerance: float = setting(1.0e-3, doc="done when every free vertex's force is at most "
-                               "this times its weight", above=0)
+                          "a potential-energy minimum, at a kinetic-energy maximum, or (both) "
+                          "where the potential rises while the kinetic energy falls (contact "
+                          "that pushes cloth out of a body raises the potential mid-swing)")
+    tolerance: float = setting(1.0e-3, doc="done when every vertex's unbalanced force (what no "
+                               "pin holds, no body supports and static friction does not "
+                               "carry) is at most this times its weight", above=0)
+    criterion: str = choice("force", DRAPE_CRITERIA, doc="force: done when the residual is "
+                            "below tolerance; motion: done when no vertex moved more than "
+                            "motion_tolerance over the last window iterations (Volino and "
+                            "Magnenat-Thalmann 2007 §3: a garment's 'visible stability'; a "
+                            "coarse garment in contact keeps forces its contacts hold)")
+    motion_tolerance: float = setting(5.0e-4, doc="criterion motion: the largest displacement "
+                                      "of any vertex over a window", unit="m", above=0)
+    window: int = setting(20, doc="criterion motion: iterations over which the displacement is "
+                          "measured", at_least=1)
     max_iterations: int = setting(2000, doc="iterations before giving up", at_least=1)
     frame_every: int = setting(10, doc="iterations between frames", at_least=1)
 

@@ -15,9 +15,15 @@ Four methods, one iteration each per call of ``Relaxation.iterate``:
   direction), safeguarded by a backtracking (Armijo) line search on the
   potential energy so a near-singular step cannot explode.
 
-All stop when the residual, the largest force on a free vertex divided by
-its weight m g (velocity-dependent forces excluded), drops below
-``drape.tolerance``.  Collective: every rank calls ``iterate`` together.
+All stop when the residual, the largest unbalanced force on a vertex
+divided by its weight m g (velocity-dependent forces excluded; what pins
+hold, bodies support and static friction carries is balanced), drops below
+``drape.tolerance``; or, with ``criterion: motion``, when no vertex moved
+more than ``motion_tolerance`` over the last ``window`` iterations (the
+paper's "visible stability" of a garment: a coarse garment pressed on a
+body keeps in-plane forces that its contacts and self-contacts hold, which
+a force residual cannot tell from imbalance).  Collective: every rank
+calls ``iterate`` together.
 """
 from __future__ import annotations
 
@@ -26,7 +32,8 @@ import math
 import numpy as np
 
 DRAPE_DIAGNOSTICS = ("potential_energy", "gravitational_energy", "elastic_energy",
-                     "kinetic_energy", "residual", "stops", "ksp_iterations", "line_search_halvings")
+                     "kinetic_energy", "residual", "window_motion", "stops", "ksp_iterations",
+                     "line_search_halvings")
 
 
 class Relaxation:
@@ -42,6 +49,8 @@ class Relaxation:
         g = float(np.linalg.norm(sim.cfg.gravity)) or 9.81
         self.weight = sim.mass[: sim.n_owned] * g
         self._prev = None            # (x, v, potential, kinetic) after the last iteration
+        self._restarted = False      # the last iteration ended in a stop
+        self._checkpoint = sim.state.x[: sim.n_owned].copy()   # at the start of the motion window
         self._eps = None
 
     # ------------------------------------------------------------- measures
@@ -53,8 +62,11 @@ class Relaxation:
         sim, ctx = self.sim, self.ctx
         n, state = ctx.n_owned, sim.state
         f = ctx.forces(state.x, np.zeros_like(state.v), want_jac=False)[:n]
-        f = ctx.project(sim.constraints(contacts=state.contacts), f)   # only the free directions count
-        r = np.sqrt(np.einsum("ij,ij->i", f, f)) / self.weight
+        f = ctx.project(sim.constraints(), f)     # pins hold: only their free directions count
+        # a body holds what presses on it, and static friction what stays in
+        # its friction cone: a garment at rest on a body has its weight and
+        # its tension carried there
+        r = sim.contact.unbalanced(state.x, state.t, f) / self.weight
         return float(ctx.global_max(np.max(r, initial=0.0))[0])
 
     # ------------------------------------------------------------ iteration
@@ -72,11 +84,24 @@ class Relaxation:
             if method == "stop_and_go":
                 self._stop_if_extremum()
         self.iteration += 1
+        motion = self._window_motion()
         grav, elastic = self.sim.potential_energies()
         return {"potential_energy": grav + elastic, "gravitational_energy": grav,
                 "elastic_energy": elastic, "kinetic_energy": self.kinetic(),
-                "residual": self.residual(), "stops": self.stops, "ksp_iterations": its,
+                "residual": self.residual(), "window_motion": motion, "stops": self.stops,
+                "ksp_iterations": its,
                 "line_search_halvings": halvings}
+
+    def _window_motion(self) -> float:
+        """The largest displacement of a vertex over the last ``window``
+        iterations, measured every window iterations (NaN in between)."""
+        n, x = self.ctx.n_owned, self.sim.state.x
+        if self.iteration % self.spec.window:
+            return math.nan
+        d = x[:n] - self._checkpoint
+        self._checkpoint = x[:n].copy()
+        return float(self.ctx.global_max(np.sqrt(np.max(np.einsum("ij,ij->i", d, d),
+                                                         initial=0.0)))[0])
 
     def _zero_velocities(self):
         self.sim.state.v[:] = 0.0
@@ -90,13 +115,25 @@ class Relaxation:
         potential, kinetic = grav + elastic, self.kinetic()
         prev = self._prev
         self._prev = (state.x.copy(), state.v.copy(), potential, kinetic)
-        if prev is None:
+        # the first step from a stop is always taken: from rest a step lowers
+        # the potential unless contact pushes the cloth out (a tight garment
+        # against a body), and going back to the same state would stop forever
+        if prev is None or self._restarted:
+            self._restarted = False
             return
-        passed = potential > prev[2] if self.spec.stop_on == "potential" else kinetic < prev[3]
+        if self.spec.stop_on == "potential":
+            passed = potential > prev[2]
+        elif self.spec.stop_on == "kinetic":
+            passed = kinetic < prev[3]
+        else:
+            # both: a rise of the potential while the motion still speeds up is
+            # contact pushing cloth out of a body, not the bottom of a swing
+            passed = potential > prev[2] and kinetic < prev[3]
         if passed:
             state.x[:] = prev[0]
             self._zero_velocities()
             self.stops += 1
+            self._restarted = True
             self._prev = (state.x.copy(), state.v.copy(), prev[2], 0.0)
 
     def _newton_step(self):
@@ -126,4 +163,6 @@ class Relaxation:
 
 
 def drape_converged(diag, spec) -> bool:
+    if spec.criterion == "motion":
+        return diag["window_motion"] <= spec.motion_tolerance     # NaN between windows: False
     return diag["residual"] <= spec.tolerance and math.isfinite(diag["residual"])

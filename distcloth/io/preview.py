@@ -6,6 +6,8 @@ colliders where they were at each frame, semi-transparent grey.  The box
 holds the cloth and the bounded bodies, but these no further than one cloth
 size from the cloth (a huge body or terrain must not shrink the cloth to a
 dot); a plane is drawn as a square filling the box.
+``<stem>_views.png`` (scenes with a mesh collider, a body): the last frame
+from the front and from the side, orthographic, the body whole.
 ``<stem>_energy.png``: energies, solver iterations and the stage-time split.
 
 Uses matplotlib's object API with the Agg canvas (no pyplot, no global
@@ -18,6 +20,7 @@ import os
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator, MultipleLocator, NullLocator
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from distcloth.io.h5read import read_attrs, read_result
@@ -36,6 +39,15 @@ _CLOTH_RGB = np.array([0.30, 0.52, 0.80])
 _BODY_RGB = np.array([0.60, 0.60, 0.60])
 BODY_ALPHA = 0.35
 _LIGHT = np.array([0.35, -0.45, 0.82]) / np.linalg.norm([0.35, -0.45, 0.82])
+# The views: (title, matplotlib azimuth).  Result files are z-up and a y-up
+# body mesh is turned (x, y, z) -> (x, -z, y), so its front faces -y: the
+# front view looks from -y, the side view from +x.
+VIEWS = (("front", -90.0), ("side", 0.0))
+# A little from above: the shoulders and the garment's top edge show.
+VIEW_ELEV = 8.0
+# The views are of the dressed body: a body up to this many cloth sizes from
+# the cloth is shown whole (a skirt's wearer from head to feet).
+VIEW_REACH = 3.0
 ENERGY_NAMES = ("kinetic_energy", "gravitational_energy", "elastic_energy", "total_energy")
 ITERATION_NAMES = ("ksp_iterations", "newton_iterations")
 
@@ -116,12 +128,13 @@ def _plane_point(quad: np.ndarray, point: np.ndarray) -> np.ndarray:
     return point - ((point - quad[0]) @ n) * n
 
 
-def _view(cloth: np.ndarray, bodies: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+def _view(cloth: np.ndarray, bodies: list[dict],
+          reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """[low, high] of the picture: the cloth's box joined with the bounded
-    bodies' boxes and the planes' points under its centre, these cut to one
-    cloth size around the cloth (and left out if wholly beyond it)."""
+    bodies' boxes and the planes' points under its centre, these cut to
+    ``reach`` cloth sizes around the cloth (and left out if wholly beyond)."""
     lo, hi = cloth.reshape(-1, 3).min(axis=0), cloth.reshape(-1, 3).max(axis=0)
-    reach = float((hi - lo).max())
+    reach *= float((hi - lo).max())
     near_lo, near_hi = lo - reach, hi + reach
     for body in sorted(bodies, key=lambda b: b["plane"]):     # planes last: under the box
         if body["plane"]:
@@ -165,10 +178,11 @@ def _body_triangles(body: dict, frame: int, lo: np.ndarray, hi: np.ndarray) -> n
     return xyz[inside]
 
 
-def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int,
-                max_collider_triangles: int = MAX_COLLIDER_TRIANGLES) -> None:
-    positions, times = res["positions"], res["time"]
-    tri = res["triangles"]
+def _prepare(res: dict, max_triangles: int,
+             max_collider_triangles: int) -> tuple[np.ndarray, np.ndarray, list[dict], str]:
+    """The cloth's triangles and frames and the bodies to draw, decimated to
+    the budgets, and a note for the title saying what was decimated."""
+    positions, tri = res["positions"], res["triangles"]
     nt = tri.shape[0]
     note = ""
     if nt > max_triangles:
@@ -178,34 +192,111 @@ def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int,
     bodies, decimated = _bodies(res.get("colliders", {}), max_collider_triangles)
     if decimated:
         note += f"\n({decimated} collider mesh{'es' if decimated > 1 else ''} decimated)"
+    return tri, positions, bodies, note
+
+
+def _draw(ax, cloth_xyz: np.ndarray, bodies: list[dict], frame: int,
+          lo: np.ndarray, hi: np.ndarray, zoom: float = 1.0) -> None:
+    """Cloth triangles (opaque) and the bodies at ``frame`` (translucent) in
+    the box [lo, hi], at equal aspect."""
+    xyz = cloth_xyz
+    rgba = np.concatenate([_shade(xyz), np.ones((xyz.shape[0], 1))], axis=1)
+    for body in bodies:
+        body_xyz = _body_triangles(body, frame, lo, hi)
+        body_rgba = np.concatenate([_shade(body_xyz, _BODY_RGB),
+                                    np.full((body_xyz.shape[0], 1), BODY_ALPHA)], axis=1)
+        xyz = np.concatenate([xyz, body_xyz])
+        rgba = np.concatenate([rgba, body_rgba])
+    # one collection: the painter's sort then orders cloth and bodies
+    # triangle by triangle (between collections it orders whole collections)
+    ax.add_collection3d(Poly3DCollection(xyz, facecolors=rgba, edgecolors="none",
+                                         linewidths=0))
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(hi - lo, zoom=zoom)   # equal aspect: one metre is one metre on every axis
+    ax.tick_params(labelsize=6)
+
+
+def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int,
+                max_collider_triangles: int = MAX_COLLIDER_TRIANGLES) -> None:
+    tri, positions, bodies, note = _prepare(res, max_triangles, max_collider_triangles)
     lo, hi = _view(positions, bodies)
-    span = hi - lo
     fig = Figure(figsize=(4.2 * len(idx), 4.6), dpi=100)
     FigureCanvasAgg(fig)
     status = res["attrs"].get("status", "?")
     fig.suptitle(f"{res['attrs'].get('scene', os.path.basename(out))}: {res['frames_written']} "
                  f"frames written, status {status}{note}", fontsize=10)
-    for p, (x, t) in enumerate(zip(positions, times)):
+    for p, (x, t) in enumerate(zip(positions, res["time"])):
         ax = fig.add_subplot(1, len(idx), p + 1, projection="3d")
-        xyz = x[tri]
-        rgba = np.concatenate([_shade(xyz), np.ones((xyz.shape[0], 1))], axis=1)
-        for body in bodies:
-            body_xyz = _body_triangles(body, p, lo, hi)
-            body_rgba = np.concatenate([_shade(body_xyz, _BODY_RGB),
-                                        np.full((body_xyz.shape[0], 1), BODY_ALPHA)], axis=1)
-            xyz = np.concatenate([xyz, body_xyz])
-            rgba = np.concatenate([rgba, body_rgba])
-        # one collection: the painter's sort then orders cloth and bodies
-        # triangle by triangle (between collections it orders whole collections)
-        ax.add_collection3d(Poly3DCollection(xyz, facecolors=rgba, edgecolors="none",
-                                             linewidths=0))
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(span)             # equal aspect: one metre is one metre on every axis
+        _draw(ax, x[tri], bodies, p, lo, hi)
         ax.view_init(elev=25, azim=-60)
         ax.set_title(f"frame {idx[p]}, t = {t:.4g} s", fontsize=9)
-        ax.tick_params(labelsize=6)
+    fig.tight_layout()
+    fig.savefig(out)
+
+
+def _has_body(colliders: dict) -> bool:
+    """Whether a result file's colliders (``read_result``) hold a mesh: a body to dress."""
+    return any(body["shape"] == "mesh" for body in colliders.values())
+
+
+def _one_frame(res: dict, frame: int) -> dict:
+    """``res`` cut to one of its read frames, the moving colliders' rows too."""
+    k = range(len(res["time"]))[frame]            # a negative index counts from the end
+    colliders = {name: {**body, "positions": body["positions"][k:k + 1]} if body["moving"]
+                 else body for name, body in res.get("colliders", {}).items()}
+    return {**res, "positions": res["positions"][k:k + 1], "time": res["time"][k:k + 1],
+            "colliders": colliders}
+
+
+def _clean_axes(ax, depth: str, step: float) -> None:
+    """No panes, no grid, ticks one ``step`` apart on every axis (equal
+    spacing reads as the equal aspect it is) but none on the ``depth`` axis,
+    which points at the viewer and would crowd its ticks into a few pixels."""
+    for name in "xyz":
+        axis = getattr(ax, f"{name}axis")
+        axis.set_pane_color((1.0, 1.0, 1.0, 0.0))
+        axis.set_major_locator(NullLocator() if name == depth else MultipleLocator(step))
+    ax.grid(False)
+
+
+def _view_zoom(span: np.ndarray) -> float:
+    """mplot3d's zoom that fills the panels with the box: it leaves room for
+    the box's diagonal, but seen nearly along an axis the box is smaller.
+    One zoom for all views keeps them at one scale."""
+    extent = []
+    for _, azim in VIEWS:
+        el, az = np.deg2rad(VIEW_ELEV), np.deg2rad(azim)
+        right = np.array([-np.sin(az), np.cos(az), 0.0])
+        up = np.array([-np.sin(el) * np.cos(az), -np.sin(el) * np.sin(az), np.cos(el)])
+        extent += [np.abs(span) @ np.abs(right), np.abs(span) @ np.abs(up)]
+    return 0.95 * float(np.linalg.norm(span)) / max(extent)
+
+
+def views_png(res: dict, out: str, frame: int = -1, max_triangles: int = MAX_PREVIEW_TRIANGLES,
+              max_collider_triangles: int = MAX_COLLIDER_TRIANGLES) -> None:
+    """One read frame of ``res`` (default the last) from the front and from
+    the side (``VIEWS``), orthographic, with the colliders, written to ``out``."""
+    res = _one_frame(res, frame)
+    tri, positions, bodies, note = _prepare(res, max_triangles, max_collider_triangles)
+    lo, hi = _view(positions, bodies, VIEW_REACH)
+    step = float(np.diff(MaxNLocator(10).tick_values(0.0, float((hi - lo).max())))[0])
+    zoom = _view_zoom(hi - lo)
+    fig = Figure(figsize=(10.0, 6.4), dpi=100)
+    FigureCanvasAgg(fig)
+    # a drape's frames are numbered by iteration, a run's by time
+    when = (f"iteration {res['time'][0]:.0f}" if "drape_method" in res["attrs"]
+            else f"t = {res['time'][0]:.4g} s")
+    fig.suptitle(f"{res['attrs'].get('scene', os.path.basename(out))}: {when}, "
+                 f"status {res['attrs'].get('status', '?')}{note}", fontsize=10)
+    for p, (name, azim) in enumerate(VIEWS):
+        ax = fig.add_subplot(1, 2, p + 1, projection="3d")
+        _draw(ax, positions[0][tri], bodies, 0, lo, hi, zoom=zoom)
+        ax.set_proj_type("ortho")
+        ax.view_init(elev=VIEW_ELEV, azim=azim)
+        _clean_axes(ax, "y" if name == "front" else "x", step)
+        ax.set_title(name, fontsize=9)
     fig.tight_layout()
     fig.savefig(out)
 
@@ -299,8 +390,9 @@ def _energy_png(res: dict, out: str) -> None:
 
 def write_previews(h5_path: str | os.PathLike, out_dir: str | os.PathLike | None = None,
                    max_triangles: int = MAX_PREVIEW_TRIANGLES) -> list[str]:
-    """Write ``<stem>_frames.png`` (if any frame was written) and
-    ``<stem>_energy.png`` next to the file (or in ``out_dir``); return their paths.
+    """Write ``<stem>_frames.png`` (if any frame was written), ``<stem>_views.png``
+    (if also a mesh collider is in the file) and ``<stem>_energy.png`` next to
+    the file (or in ``out_dir``); return their paths.
 
     Serial: call on one rank only (rank 0), after the writer is closed.
     """
@@ -314,6 +406,10 @@ def write_previews(h5_path: str | os.PathLike, out_dir: str | os.PathLike | None
     if idx:
         path = os.path.join(folder, f"{stem}_frames.png")
         _frames_png(res, idx, path, max_triangles)
+        written.append(path)
+    if idx and _has_body(res["colliders"]):
+        path = os.path.join(folder, f"{stem}_views.png")
+        views_png(res, path, frame=-1, max_triangles=max_triangles)   # the last frame, read above
         written.append(path)
     path = os.path.join(folder, f"{stem}_energy.png")
     _energy_png(res, path)

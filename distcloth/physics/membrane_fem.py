@@ -89,13 +89,21 @@ NO_TABLE = np.zeros((3, 2, 2))
 
 @njit(cache=True)
 def _tabulated(e, table):
-    """(Psi(e), S(e), dS/de) of a piecewise-linear S through table[:, 0] -> table[:, 1]."""
+    """(Psi(e), S(e), dS/de) of a piecewise-linear S through table[:, 0] -> table[:, 1].
+
+    A first row at negative strain (with_compression) is the compression
+    branch: S linear through it for e <= 0; otherwise compression continues
+    the first segment."""
     k = table.shape[0]
+    start = 1 if table[0, 0] < 0.0 else 0
     if e <= 0.0:
-        slope = (table[1, 1] - table[0, 1]) / (table[1, 0] - table[0, 0])
+        if start == 1:
+            slope = table[0, 1] / table[0, 0]
+        else:
+            slope = (table[1, 1] - table[0, 1]) / (table[1, 0] - table[0, 0])
         return 0.5 * slope * e * e, slope * e, slope
     psi = 0.0
-    for i in range(k - 1):
+    for i in range(start, k - 1):
         e0, e1 = table[i, 0], table[i + 1, 0]
         s0, s1 = table[i, 1], table[i + 1, 1]
         slope = (s1 - s0) / (e1 - e0)
@@ -617,6 +625,14 @@ class MembraneFEMTerm(ForceTerm):
 
     def element_hessians(self):
         return element_hessians(self.hr)
+
+
+def with_compression(table, factor: float):
+    """A tension curve [[e, S], ...] from (0, 0) with a compression branch of
+    ``factor`` times its first slope, as a leading row at e = -1."""
+    table = np.asarray(table, dtype=np.float64)
+    slope = (table[1, 1] - table[0, 1]) / (table[1, 0] - table[0, 0])
+    return np.vstack([[-1.0, -factor * slope], table])
 
 
 def _pad(table, k):

@@ -4,7 +4,8 @@ lines of a welded garment.
 Stitch springs (the sewing phase; the tutorial's Part 2 §1.2 pre-positioned
 panels "sewn" by seam forces): each pair of stitched vertices is joined by a
 spring of stiffness k whose rest length goes linearly from the pair's start
-gap to zero over the sewing duration, then stays zero.  The ramp bounds how
+gap to zero over the sewing duration (for a piece of layer k, over the k-th
+such interval), then stays zero.  The ramp bounds how
 fast the seams close (no panel is flung across the body), and once at zero
 the spring is the linear zero-length spring f = -k (x_a - x_b), whose
 Jacobian k I needs no direction, so coincident pairs are fine.
@@ -26,9 +27,11 @@ class StitchTerm(ForceTerm):
     name = "force:sewing"
     has_potential = True
 
-    def __init__(self, pairs, gap, stiffness, duration, weight, owned):
+    def __init__(self, pairs, gap, stiffness, duration, weight, owned, start=None):
         self.pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
         self.gap = np.asarray(gap, dtype=np.float64)
+        # when each pair's ramp begins (layers are sewn inside out)
+        self.start = np.zeros(self.gap.shape) if start is None else np.asarray(start, float)
         self.k = np.full(self.pairs.shape[0], float(stiffness))
         self.duration = float(duration)
         self.weight = np.asarray(weight, dtype=np.float64)
@@ -42,7 +45,7 @@ class StitchTerm(ForceTerm):
 
     def at_time(self, t: float) -> None:
         """Rest lengths at the end of the attempt ending at time t."""
-        self.rest = self.gap * max(0.0, 1.0 - t / self.duration)
+        self.rest = self.gap * np.clip(1.0 - (t - self.start) / self.duration, 0.0, 1.0)
 
     def stencils(self):
         return [self.pairs]
@@ -96,8 +99,16 @@ def build_sewing(cfg, model, layout) -> ForceTerm | None:
     pairs, gap = model.stitch_pairs[distinct], model.stitch_gap[distinct]
     local, weight, ids = local_elements(pairs, layout)
     sewing = cfg.garment.sewing
+    # the initial-layering rule, in time: a piece of layer k closes its seams
+    # over the k-th sewing interval, after the garments under it are closed
+    # (an outer panel's edge would otherwise slip into an inner garment's
+    # still open seam and be caught there)
+    layer = np.zeros(model.num_vertices)
+    for spec, info in zip(cfg.cloth, model.pieces):
+        layer[info.vertex_start:info.vertex_stop] = spec.layer
+    start = layer[pairs[ids, 0]] * sewing.duration
     return StitchTerm(local, gap[ids], sewing.stiffness, sewing.duration, weight,
-                      local[:, 0] < layout.n_owned)
+                      local[:, 0] < layout.n_owned, start)
 
 
 def build_seams(cfg, model, layout) -> ForceTerm | None:

@@ -12,7 +12,7 @@ from . import springs as sk
 from .base import ForceTerm, local_elements
 from .bending import DihedralBendingTerm, IsometricBendingTerm
 from .bending_shell import JUMP_GAMMA, ShellDihedralBendingTerm, ShellIsometricBendingTerm
-from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress
+from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress, with_compression
 
 
 class _SpringSet(ForceTerm):
@@ -191,12 +191,16 @@ def _fem_membrane(model, layout, material):
     corners = None if model.rest_triangles is None else model.rest_triangles[ids]
     scale = None if model.triangle_scale is None else model.triangle_scale[ids]
     tables = None
-    if any(t is not None for t in (material.tension_weft, material.tension_warp, material.shear_curve)):
+    if (any(t is not None for t in (material.tension_weft, material.tension_warp,
+                                    material.shear_curve)) or material.compression != 1.0):
         # a missing curve keeps the linear law of EG07 tutorial Eq. 22 (its C11 / C22 / C33 slope)
         def linear(c):
             return ((0.0, 0.0), (1.0, c))
-        tables = (material.tension_weft or linear(C[0, 0]), material.tension_warp or linear(C[1, 1]),
-                  material.shear_curve or linear(C[2, 2]))
+        tables = [material.tension_weft or linear(C[0, 0]),
+                  material.tension_warp or linear(C[1, 1]),
+                  material.shear_curve or linear(C[2, 2])]
+        if material.compression != 1.0:
+            tables[:2] = [with_compression(t, material.compression) for t in tables[:2]]
     return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables,
                            rest_corners=corners, scale=scale)
 
