@@ -73,6 +73,14 @@ class Model:
     def num_springs(self) -> int:
         return self.spring_vertices.shape[0]
 
+    def per_vertex(self, values) -> np.ndarray:
+        """(n,) each vertex's entry of ``values``, one per piece."""
+        values = np.asarray(values)
+        out = np.zeros(self.num_vertices, dtype=values.dtype)
+        for value, info in zip(values, self.pieces):
+            out[info.vertex_start:info.vertex_stop] = value
+        return out
+
     def start_positions(self) -> np.ndarray:
         return self.rest_positions if self.initial_positions is None else self.initial_positions
 

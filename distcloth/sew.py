@@ -87,10 +87,7 @@ def _not_closed(sim, spec) -> str:
 
 
 def _per_vertex(cfg, model, value) -> np.ndarray:
-    out = np.zeros(model.num_vertices)
-    for spec, info in zip(cfg.cloth, model.pieces):
-        out[info.vertex_start:info.vertex_stop] = value(spec.material)
-    return out
+    return model.per_vertex([float(value(spec.material)) for spec in cfg.cloth])
 
 
 def weld(sim: Simulation, cfg, comm, *, quiet=False, force=False,

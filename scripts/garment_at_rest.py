@@ -48,6 +48,7 @@ sys.path.insert(0, str(ROOT))
 
 from distcloth.garment.start_check import ClosedMesh, self_intersections  # noqa: E402
 from distcloth.io.h5read import read_attrs, read_result  # noqa: E402
+from distcloth.sew import sewing_path  # noqa: E402
 
 DEEP_FRACTION = 0.1         # "deep": inside by more than this fraction of d
 SEWING_SUFFIX = "_sewing"
@@ -122,7 +123,7 @@ def main_and_sewing(path: str) -> tuple[str, str]:
     stem, ext = os.path.splitext(path)
     if stem.endswith(SEWING_SUFFIX):
         return stem[: -len(SEWING_SUFFIX)] + ext, path
-    return path, f"{stem}{SEWING_SUFFIX}{ext}"
+    return path, sewing_path(path)
 
 
 def _config(text: str) -> dict:

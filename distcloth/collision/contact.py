@@ -192,9 +192,7 @@ class ContactModel:
             for c in self.colliders:
                 c.friction *= cfg.garment.sewing.friction
         self.drive_end = max([c.drive_end for c in self.colliders] + [0.0])
-        thick = np.zeros(model.num_vertices)
-        for piece, spec in zip(model.pieces, cfg.cloth):
-            thick[piece.vertex_start:piece.vertex_stop] = spec.thickness
+        thick = model.per_vertex([float(spec.thickness) for spec in cfg.cloth])
         self.cloth_thickness = thick[layout.local_input]
         self.thickness = float(thick.max(initial=0.0))     # the triangle pipeline's contact distance
         self.never_contact = np.zeros(self.n_local, dtype=bool)   # pins keep their constraint

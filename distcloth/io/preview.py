@@ -218,6 +218,11 @@ def _draw(ax, cloth_xyz: np.ndarray, bodies: list[dict], frame: int,
     ax.tick_params(labelsize=6)
 
 
+def _when(attrs: dict, t: float) -> str:
+    """A frame's label: a drape numbers its frames by iteration, a run by time."""
+    return f"iteration {t:.0f}" if "drape_method" in attrs else f"t = {t:.4g} s"
+
+
 def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int,
                 max_collider_triangles: int = MAX_COLLIDER_TRIANGLES) -> None:
     tri, positions, bodies, note = _prepare(res, max_triangles, max_collider_triangles)
@@ -231,7 +236,7 @@ def _frames_png(res: dict, idx: list[int], out: str, max_triangles: int,
         ax = fig.add_subplot(1, len(idx), p + 1, projection="3d")
         _draw(ax, x[tri], bodies, p, lo, hi)
         ax.view_init(elev=25, azim=-60)
-        ax.set_title(f"frame {idx[p]}, t = {t:.4g} s", fontsize=9)
+        ax.set_title(f"frame {idx[p]}, {_when(res['attrs'], t)}", fontsize=9)
     fig.tight_layout()
     fig.savefig(out)
 
@@ -285,10 +290,8 @@ def views_png(res: dict, out: str, frame: int = -1, max_triangles: int = MAX_PRE
     zoom = _view_zoom(hi - lo)
     fig = Figure(figsize=(10.0, 6.4), dpi=100)
     FigureCanvasAgg(fig)
-    # a drape's frames are numbered by iteration, a run's by time
-    when = (f"iteration {res['time'][0]:.0f}" if "drape_method" in res["attrs"]
-            else f"t = {res['time'][0]:.4g} s")
-    fig.suptitle(f"{res['attrs'].get('scene', os.path.basename(out))}: {when}, "
+    fig.suptitle(f"{res['attrs'].get('scene', os.path.basename(out))}: "
+                 f"{_when(res['attrs'], res['time'][0])}, "
                  f"status {res['attrs'].get('status', '?')}{note}", fontsize=10)
     for p, (name, azim) in enumerate(VIEWS):
         ax = fig.add_subplot(1, 2, p + 1, projection="3d")

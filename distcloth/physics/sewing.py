@@ -103,9 +103,7 @@ def build_sewing(cfg, model, layout) -> ForceTerm | None:
     # over the k-th sewing interval, after the garments under it are closed
     # (an outer panel's edge would otherwise slip into an inner garment's
     # still open seam and be caught there)
-    layer = np.zeros(model.num_vertices)
-    for spec, info in zip(cfg.cloth, model.pieces):
-        layer[info.vertex_start:info.vertex_stop] = spec.layer
+    layer = model.per_vertex([float(spec.layer) for spec in cfg.cloth])
     start = layer[pairs[ids, 0]] * sewing.duration
     return StitchTerm(local, gap[ids], sewing.stiffness, sewing.duration, weight,
                       local[:, 0] < layout.n_owned, start)

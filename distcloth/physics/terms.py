@@ -212,9 +212,7 @@ def _hinge_bending(cfg, model, layout, kind):
     elements = model.shell_stencil if shell else model.hinge_vertices
     local, weight, ids = local_elements(elements, layout)
     # each element takes the bending stiffness of the piece its first vertex belongs to
-    piece_of_vertex = np.zeros(model.num_vertices, dtype=np.int64)
-    for p, info in enumerate(model.pieces):
-        piece_of_vertex[info.vertex_start:info.vertex_stop] = p
+    piece_of_vertex = model.per_vertex(np.arange(len(model.pieces)))
     piece_B = np.array([spec.material.bending for spec in cfg.cloth])
     B = piece_B[piece_of_vertex[elements[ids, 0]]]
     rest = model.rest_positions[layout.local_input]
