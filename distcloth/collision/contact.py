@@ -54,6 +54,8 @@ from .image_collider import ImageSpaceCollider
 from .imagespace import velocity_response
 from .impulses import ReusedCandidates, resolve
 from .mesh_query import MeshProximity
+from .proximity import mesh_edges
+from .sagitta import body_clearance
 from .response import (Contacts, contact_constraint, detect, friction, normal_impulse, project,
                        unbalanced_force)
 
@@ -66,6 +68,9 @@ BAND_FRACTION = 0.5      # a vertex that ended the last step within this fractio
                          # onto a body meets the solve, not the fail-safe
 ADHESION_TOLERANCE = 1e-3   # a contact is adhesive when its constraint pulls by more than this
                             # fraction of the vertex's weight impulse m g h
+BODY_CLEARANCE_FLOOR = 0.1      # cloth pairs with a closed mesh collider's primitives keep the
+                                # thickness less the cloth's sagitta over the body's curvature
+                                # (sagitta.py), at least this fraction of it: the CCD's margin
 CANDIDATE_SLACK = 0.5    # the CCD passes of a step reuse their candidates while no end position
                          # moved more than this fraction of the thickness (impulses.ReusedCandidates)
 
@@ -207,8 +212,23 @@ class ContactModel:
         self.pipeline_meshes = [c.mesh for c in self.colliders if c.mesh is not None]
         self.detector = None
         if self.pipeline_meshes or self.self_collision:
+            closed = [c.closed for c in self.colliders if c.mesh is not None]
             self.pipeline_meshes += [plane_quad(spec, model.rest_positions)
                                      for spec in collider_specs if spec.shape == "plane"]
+            # the distance each vertex's pipeline pairs keep: the cloth's (and a
+            # plane's, an open mesh's) the thickness; a closed mesh's less its
+            # sagitta under the cloth's longest edge (sagitta.py)
+            edge = float(np.max(np.linalg.norm(np.diff(
+                model.rest_positions[mesh_edges(model.triangles)], axis=1)[:, 0], axis=1),
+                initial=0.0))
+            keep = [np.full(model.num_vertices, self.thickness)]
+            for j, m in enumerate(self.pipeline_meshes):
+                if j < len(closed) and closed[j]:
+                    keep.append(body_clearance(m.vertices(0.0), m.triangles, self.thickness,
+                                               edge, BODY_CLEARANCE_FLOOR * self.thickness))
+                else:
+                    keep.append(np.full(m.vertices(0.0).shape[0], self.thickness))
+            self.pipeline_keep = np.concatenate(keep)
             ws = cfg.work_stealing
             self.detector = build_collisions(comm, model, layout, self.pipeline_meshes,
                                              self.self_collision, stealing=ws.enabled, a=ws.a,
@@ -477,7 +497,8 @@ class ContactModel:
         g = det.geometry
         found = ReusedCandidates(det.candidates, self.thickness, CANDIDATE_SLACK * self.thickness)
         U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness,
-                            self.pipeline_friction, found, hits=det.shared_hits, same=det.same)
+                            self.pipeline_friction, found, hits=det.shared_hits, same=det.same,
+                            keep=self.pipeline_keep)
         mine = self.owned_input
         dU = U2[mine] - U[mine]
         report.impulse_hits = float(sum(stats["ccd_hits"]))

@@ -180,9 +180,23 @@ def _prep(x0, u, inv_mass, tri, edges):
             np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2))
 
 
+def pair_thickness(ids, coef, thickness, keep=None):
+    """(k,) the distance each pair keeps: ``thickness``, or with ``keep`` (n,)
+    per vertex: a vertex-face pair (coef[:, 0] = 1) its vertex's, an
+    edge-edge pair the smaller of its vertices' (a primitive belongs wholly
+    to the cloth or to one collider).  A cloth vertex over a body face keeps
+    the cloth's: the body's distance field holds that vertex at the offset
+    anyway; a body vertex or edge under a cloth face or edge keeps the body's."""
+    if keep is None:
+        return np.full(ids.shape[0], float(thickness))
+    keep = np.asarray(keep)
+    return np.where(coef[:, 0] > 0.0, keep[ids[:, 0]], np.min(keep[ids], axis=1))
+
+
 # ------------------------------------------------------------------ 1. proximity repulsion
 
-def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, iterations=4):
+def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, iterations=4,
+              keep=None):
     """Proximity response at x0 (Bridson et al. 2002 §7.2, friction §7.3) for the contacts
     ``vf`` / ``ee`` (proximity.py NamedTuples, distance < thickness).
 
@@ -192,11 +206,14 @@ def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, i
     by the end of the step, never more (the "limited" repulsion of §7.2 with
     the full overlap as target).  Friction reduces the relative tangential
     velocity by at most ``friction * dvn``.  ``iterations`` Jacobi passes
-    (pairs already satisfied are inactive).  Returns the new u."""
+    (pairs already satisfied are inactive).  ``keep`` (n,): per-vertex
+    distances that replace ``thickness`` as the target (``resolve``).
+    Returns the new u."""
     x0, u, inv_mass, tri, edges = _prep(x0, u, inv_mass, tri, edges)
     ids, coef, nrm = _cat(_vf_stencil(tri, vf.vertex, vf.face, vf.weights) + (vf.normal,),
                           _ee_stencil(edges, ee.edge_a, ee.edge_b, ee.params) + (ee.normal,))
-    target = (float(thickness) - np.concatenate([vf.distance, ee.distance])) / h
+    target = (pair_thickness(ids, coef, thickness, keep)
+              - np.concatenate([vf.distance, ee.distance])) / h
     for _ in range(iterations):
         u, nact = _apply(u, inv_mass, ids, coef, nrm, target, friction)
         if nact == 0:
@@ -221,7 +238,7 @@ def collisions(x0, x1, tri, edges, vf_pairs, ee_pairs, eta, with_rows=False):
 
 
 def ccd_impulses(x0, u, h, inv_mass, tri, edges, vf_pairs, ee_pairs, thickness,
-                 eta=None, margin=0.01, sweeps=8, hits=collisions):
+                 eta=None, margin=0.01, sweeps=8, hits=collisions, keep=None):
     """One detection pass over the CCD hits of the candidates on
     x0 -> x0 + h u, answered with inelastic impulses (Bridson et al. 2002 §7.1).  For a hit with normal n and
     start gap g0 = n . sum c_j x0_j the relative normal velocity is raised to
@@ -244,7 +261,8 @@ def ccd_impulses(x0, u, h, inv_mass, tri, edges, vf_pairs, ee_pairs, thickness,
     if ids.shape[0] == 0:
         return u, 0
     g0 = np.einsum("kd,kd->k", np.einsum("kj,kjd->kd", coef, x0[ids]), nrm)
-    target = (np.clip(g0, 0.0, thickness) - g0 + margin * thickness) / h
+    th = pair_thickness(ids, coef, thickness, keep)
+    target = (np.clip(g0, 0.0, th) - g0 + margin * th) / h
     for _ in range(sweeps):
         u, nact = _apply(u, inv_mass, ids, coef, nrm, target, 0.0)
         if nact == 0:
@@ -440,7 +458,7 @@ class ReusedCandidates:
 
 def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
             max_ccd_iterations=10, max_zone_iterations=100, repulsion_iterations=16,
-            sweeps=8, eta=None, margin=0.01, hits=collisions, same=None):
+            sweeps=8, eta=None, margin=0.01, hits=collisions, same=None, keep=None):
     """The Bridson et al. 2002 §3 pipeline on the average velocity u of a step:
 
     1. proximity at x0 (pairs closer than ``thickness``) -> ``repulsion``;
@@ -458,6 +476,15 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
     distributed drop-in of ``DistributedCollisions.shared_hits``); ``same``:
     see ``clean_pairs``.
 
+    ``keep`` (n,): the distance each vertex's pairs keep in the repulsion
+    and the CCD impulses instead of ``thickness`` (``pair_thickness``);
+    contact.py gives a closed body's vertices the thickness less the cloth's
+    sagitta over the body's curvature there (sagitta.py): a distance-field
+    collider already holds every cloth *vertex* at its contact offset, and
+    repelling a coarse cloth triangle on a curved body to the full thickness
+    from the body's vertices lifted it every step, for the contact to put
+    its corners back the next.
+
     Returns (u_new, stats): proximity_pairs, ccd_hits (per pass), zones,
     zone_vertices, zone_iterations, remaining (CCD hits of u_new, 0 unless
     the zone iteration cap was hit)."""
@@ -466,14 +493,15 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
     vf, ee = clean_pairs(*candidates(x0, x0), tri, edges, inv_mass, same)
     pvf = vertex_face_contacts(x0, tri, vf, thickness)
     pee = edge_edge_contacts(x0, edges, ee, thickness)
-    u = repulsion(x0, u, h, inv_mass, tri, edges, pvf, pee, thickness, friction, repulsion_iterations)
+    u = repulsion(x0, u, h, inv_mass, tri, edges, pvf, pee, thickness, friction,
+                  repulsion_iterations, keep)
     stats = {"proximity_pairs": int(pvf.vertex.size + pee.edge_a.size), "ccd_hits": [],
              "zones": 0, "zone_vertices": 0, "zone_iterations": 0, "remaining": 0}
     n_hits = 1
     for _ in range(max_ccd_iterations):
         vf, ee = clean_pairs(*candidates(x0, x0 + h * u), tri, edges, inv_mass, same)
         u, n_hits = ccd_impulses(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, eta, margin,
-                                 sweeps, hits)
+                                 sweeps, hits, keep)
         stats["ccd_hits"].append(n_hits)
         if n_hits == 0:
             break
