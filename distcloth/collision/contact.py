@@ -218,9 +218,8 @@ class ContactModel:
             # the distance each vertex's pipeline pairs keep: the cloth's (and a
             # plane's, an open mesh's) the thickness; a closed mesh's less its
             # sagitta under the cloth's longest edge (sagitta.py)
-            edge = float(np.max(np.linalg.norm(np.diff(
-                model.rest_positions[mesh_edges(model.triangles)], axis=1)[:, 0], axis=1),
-                initial=0.0))
+            ends = model.rest_positions[mesh_edges(model.triangles)]
+            edge = float(np.max(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1), initial=0.0))
             keep = [np.full(model.num_vertices, self.thickness)]
             for j, m in enumerate(self.pipeline_meshes):
                 if j < len(closed) and closed[j]:

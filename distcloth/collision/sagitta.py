@@ -3,8 +3,9 @@ own vertices and edges: arrays in, arrays out.
 
 The distance-field contact (``response.py``) holds every cloth *vertex* at
 the offset d from a body.  A cloth triangle of edge L whose corners rest at
-d over a body of radius R sags toward it between them: its middle lies the
-sagitta L^2 / (8 R) closer (2.3 mm for 3 cm edges over a 5 cm arm).  The
+d over a body of radius R sags toward it between them: an edge's middle
+lies L^2 / (8 R) closer, an equilateral face's centre (circumradius
+L / sqrt 3) L^2 / (6 R) (3 mm for 3 cm edges over a 5 cm arm).  The
 triangle pipeline (``impulses.py``) measures distances between primitives,
 not vertices, and a repulsion that pushed such a triangle back to d from the
 body's vertices lifted it every step, for the contact to set its corners
@@ -19,19 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .imagespace import vertex_normals
 from .proximity import mesh_edges
-
-
-def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(n, 3) unit area-weighted vertex normals (zero for unused vertices)."""
-    x = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    fn = np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]])     # 2 * area * n
-    n = np.zeros_like(x)
-    for k in range(3):
-        np.add.at(n, t[:, k], fn)
-    norm = np.linalg.norm(n, axis=1)
-    return np.divide(n, norm[:, None], out=np.zeros_like(n), where=norm[:, None] > 0)
 
 
 def convex_curvature(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
