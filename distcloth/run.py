@@ -142,6 +142,9 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
     for name, (du, dv) in bounds.items():
         log(comm, f"image-space collider {name}: x-y error bound (Vassilev et al. 2001 Eq. 14) "
                   f"{1e3 * du:.2f} x {1e3 * dv:.2f} mm")
+    for c in sim.contact.colliders:
+        if c.region is not None:
+            log(comm, f"collider {c.name} in contact: {c.region}")
     writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
                          {"steps": n_steps, "output_every_steps": every, **image},
                          garment_arrays(sim.model))

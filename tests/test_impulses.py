@@ -285,3 +285,42 @@ def test_crumpling_cloth_stays_intersection_free(collider):
         if not do_resolve:
             assert count_self_intersections(xs, tri) > 0
     assert zones > 0                                                # the fail-safe was exercised
+
+
+def test_pair_weights_move_the_outer_layer_only():
+    # a vertex-face pair (vertex 3 over face 0-1-2): with the face on layer 0
+    # and the vertex on layer 1 only the vertex gets an impulse; on one layer
+    # both; and an outer vertex that cannot move (pinned) leaves the true masses
+    ids = np.array([[3, 0, 1, 2]])
+    inv = np.array([1.0, 2.0, 3.0, 4.0])
+    assert np.array_equal(I.pair_weights(inv, ids), [[4.0, 1.0, 2.0, 3.0]])
+    layered = I.pair_weights(inv, ids, np.array([0.0, 0.0, 0.0, 1.0]))
+    assert np.array_equal(layered, [[4.0, 0.0, 0.0, 0.0]])
+    same = I.pair_weights(inv, ids, np.zeros(4))
+    assert np.array_equal(same, [[4.0, 1.0, 2.0, 3.0]])
+    pinned = I.pair_weights(np.array([1.0, 2.0, 3.0, 0.0]), ids, np.array([0.0, 0.0, 0.0, 1.0]))
+    assert np.array_equal(pinned, [[0.0, 1.0, 2.0, 3.0]])
+
+
+def test_repulsion_between_layers_lifts_the_outer_sheet_and_keeps_the_inner():
+    # two parallel triangles 1 mm apart, thickness 3 mm: with layers the
+    # repulsion moves the upper (outer) one away by the whole 2 mm overlap
+    # over the step and leaves the lower one exactly still; without, both move
+    x0 = np.array([[-1.0, -1.0, 0.0], [3.0, -1.0, 0.0], [-1.0, 3.0, 0.0],
+                   [0.2, 0.2, 0.001], [1.2, 0.2, 0.001], [0.2, 1.2, 0.001]])
+    tri = np.array([[0, 1, 2], [3, 4, 5]])
+    edges = mesh_edges(tri)
+    inv = np.ones(6)
+    h, d = 0.01, 0.003
+    vf = np.array([[3, 0], [4, 0], [5, 0], [0, 1], [1, 1], [2, 1]])
+    pvf = vertex_face_contacts(x0, tri, vf, d)
+    pee = edge_edge_contacts(x0, edges, np.zeros((0, 2), np.int64), d)
+    u = np.zeros((6, 3))
+    layers = np.array([0.0, 0, 0, 1, 1, 1])
+    lifted = I.repulsion(x0, u, h, inv, tri, edges, pvf, pee, d, iterations=16, priority=layers)
+    assert np.array_equal(lifted[:3], u[:3])
+    gap = x0[3:, 2] + h * lifted[3:, 2]
+    # Jacobi passes reach the target from below to within 1 % of the overlap
+    assert np.all(gap > d - 0.01 * (d - 0.001)) and np.all(gap < d + 1e-9)
+    both = I.repulsion(x0, u, h, inv, tri, edges, pvf, pee, d, iterations=16)
+    assert (both[:3, 2] < 0).all() and (both[3:, 2] > 0).all()

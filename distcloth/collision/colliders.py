@@ -25,12 +25,13 @@ from typing import Sequence
 
 import numpy as np
 
+from ..rotations import rotation_matrix
 from ..scene.meshio import read_mesh
 from ..scene.placement import Y_UP_TO_Z_UP, place_frames
 
 __all__ = [
     "RigidMotion", "Plane", "Sphere", "Capsule", "Box", "AnalyticCollider",
-    "MeshCollider", "load_mesh_collider", "rotvec_to_matrix",
+    "MeshCollider", "SkinnedMeshCollider", "load_mesh_collider", "rotvec_to_matrix",
 ]
 
 
@@ -333,6 +334,7 @@ class MeshCollider:
     y = R(t) x(t) + p(t), v = R ẋ + v_p + ω × (y − p).
     Only geometry and velocities; contacts are found by the BVH code.
     """
+    cut_of_closed = False       # a part of a closed mesh (body/regions.py): distances stay signed
 
     def __init__(self, frames, triangles, frame_times=(0.0,), motion: RigidMotion | None = None,
                  friction: float = 0.0, thickness: float = 0.0):
@@ -404,6 +406,42 @@ class MeshCollider:
         return xdot @ R.T + self.motion.point_velocity(self.motion.to_world(x, t), t)
 
 
+class SkinnedMeshCollider(MeshCollider):
+    """A body mesh skinned by motion capture (body/animated.py): its vertices
+    at t are the skinned rest mesh placed in the scene by one affine map
+    x -> A x + b (the collider's up axis, scale, rotation and move, fixed by
+    the rest mesh), its velocities the skin's; the rigid ``motion`` goes on
+    top as for any mesh.  Same triangles at every t, so the BVH is refit."""
+
+    def __init__(self, body, A, b, motion: RigidMotion | None = None, friction: float = 0.0,
+                 thickness: float = 0.0):
+        self.body = body
+        self.A = np.asarray(A, dtype=np.float64)
+        self.b = np.asarray(b, dtype=np.float64)
+        placed = body.rest @ self.A.T + self.b
+        super().__init__(placed[None], body.triangles, (0.0,), motion, friction, thickness)
+        self.drive_end = float(body.end_time)
+
+    @property
+    def is_deforming(self) -> bool:
+        return True
+
+    def _local(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        return self.body.positions(t) @ self.A.T + self.b, self.body.velocities(t) @ self.A.T
+
+    # positions and velocities apart: most queries want only the positions
+    def vertices(self, t: float = 0.0) -> np.ndarray:
+        x = self.body.positions(t) @ self.A.T + self.b
+        return x if self.motion.is_identity else self.motion.to_world(x, t)
+
+    def velocities(self, t: float = 0.0) -> np.ndarray:
+        xdot = self.body.velocities(t) @ self.A.T
+        if self.motion.is_identity:
+            return xdot
+        R, _ = self.motion.transform(t)
+        return xdot @ R.T + self.motion.point_velocity(self.vertices(t), t)
+
+
 def load_mesh_collider(paths, frame_times=None, frame_rate: float | None = None,
                        motion: RigidMotion | None = None, friction: float = 0.0,
                        thickness: float = 0.0) -> MeshCollider:
@@ -462,3 +500,17 @@ def load_collider_mesh(spec, motion: RigidMotion | None = None) -> MeshCollider:
     mesh.frames = place_frames(frames, spec.rotation, center=dict(spec.geometry).get("center"),
                                translation=spec.translation)
     return mesh
+
+
+def placement_map(spec, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The collider placement (load_collider_mesh) of a mesh whose file
+    positions are ``rest`` as one affine map x -> A x + b."""
+    A = np.eye(3)
+    if spec.up_axis == "y":
+        A = Y_UP_TO_Z_UP @ A
+    A = spec.scale * A
+    A = rotation_matrix(spec.rotation) @ A
+    placed = place_frames((rest @ (spec.scale * (Y_UP_TO_Z_UP if spec.up_axis == "y"
+                                                 else np.eye(3))).T)[None], spec.rotation,
+                          center=dict(spec.geometry).get("center"), translation=spec.translation)[0]
+    return A, np.mean(placed - rest @ A.T, axis=0)

@@ -48,6 +48,7 @@ import numpy as np
 
 from ..parallel.collide import build_collisions
 from ..physics.contact_friction import ContactFrictionTerm
+from ..scene.animated_body import load_animated_collider, reachable_part
 from .colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane, RigidMotion,
                         Sphere, load_collider_mesh)
 from .image_collider import ImageSpaceCollider
@@ -103,6 +104,7 @@ class Collider:
     drive_end: float = 0.0      # s: the last keyframe or frame (it moves until then)
     mesh: MeshCollider | None = None                  # in the triangle pipeline (bvh meshes)
     image_error_bound: tuple[float, float] | None = None   # image-space maps: Eq. 14 (du, dv), m
+    region: str | None = None   # a moving body's part in the contact (animation.reach)
 
 
 def rigid_motion(spec) -> RigidMotion | None:
@@ -112,8 +114,9 @@ def rigid_motion(spec) -> RigidMotion | None:
     return RigidMotion(spec.motion.times, spec.motion.translations, spec.motion.rotations)
 
 
-def make_collider(spec, implicit: bool) -> Collider:
-    """The collider a scene's ``colliders:`` entry describes."""
+def make_collider(spec, implicit: bool, key: str = "colliders", garment_points=None) -> Collider:
+    """The collider a scene's ``colliders:`` entry (at ``key``) describes;
+    ``garment_points``: where the cloth starts (a moving body's reach)."""
     motion = rigid_motion(spec)
     drive_end = float(motion.times[-1]) if motion is not None else 0.0
     common = dict(name=spec.name, friction=spec.friction, thickness=spec.thickness)
@@ -122,17 +125,26 @@ def make_collider(spec, implicit: bool) -> Collider:
                                 spec.friction, spec.thickness)
         return Collider(kind="analytic", query=lambda x, t, maxd: body.query(x, t), body=body,
                         law=friction_law("analytic", implicit), drive_end=drive_end, **common)
-    mesh = load_collider_mesh(spec, motion)
-    drive_end = max(drive_end, float(mesh.frame_times[-1]))
+    if spec.animation is not None:
+        mesh = load_animated_collider(spec, key, motion)
+        drive_end = max(drive_end, mesh.drive_end)
+    else:
+        mesh = load_collider_mesh(spec, motion)
+        drive_end = max(drive_end, float(mesh.frame_times[-1]))
     if spec.method == "image":
         img = ImageSpaceCollider(mesh, resolution=tuple(spec.resolution),
                                  axis="xyz".index(spec.axis))
         return Collider(kind="image", query=img.query, body=mesh,
                         law=friction_law("image", implicit), drive_end=drive_end,
                         image_error_bound=tuple(float(e) for e in img.error_bound), **common)
+    region, drawn = None, mesh
+    if spec.animation is not None and spec.animation.reach is not None and garment_points is not None:
+        # the contact sees only the part in reach; pictures and output the whole body
+        mesh, region = reachable_part(mesh, garment_points, spec.animation.reach)
     prox = MeshProximity(mesh)
-    return Collider(kind="mesh", query=prox.query, body=mesh, law=friction_law("mesh", implicit),
-                    closed=bool(prox.closed), drive_end=drive_end, mesh=mesh, **common)
+    return Collider(kind="mesh", query=prox.query, body=drawn, law=friction_law("mesh", implicit),
+                    closed=bool(prox.closed), drive_end=drive_end, mesh=mesh, region=region,
+                    **common)
 
 
 def plane_quad(spec, rest_positions) -> MeshCollider:
@@ -192,7 +204,8 @@ class ContactModel:
         self.mass = mass
         self.self_collision = cfg.has("self_collision")
         collider_specs = cfg.colliders if cfg.has("collisions") else ()
-        self.colliders = [make_collider(spec, implicit) for spec in collider_specs]
+        self.colliders = [make_collider(spec, implicit, f"colliders.{i}", model.start_positions())
+                          for i, spec in enumerate(collider_specs)]
         if model.stitch_pairs is not None:     # a garment being sewn (docs/garments.md)
             for c in self.colliders:
                 c.friction *= cfg.garment.sewing.friction
@@ -228,6 +241,13 @@ class ContactModel:
                 else:
                     keep.append(np.full(m.vertices(0.0).shape[0], self.thickness))
             self.pipeline_keep = np.concatenate(keep)
+            # garments worn in layers: a pair between layers moves the outer
+            # one only (impulses.pair_weights); the bodies rank below every layer
+            layer = model.per_vertex([float(spec.layer) for spec in cfg.cloth])
+            self.pipeline_priority = None
+            if np.unique(layer).size > 1:
+                n_mesh = sum(m.vertices(0.0).shape[0] for m in self.pipeline_meshes)
+                self.pipeline_priority = np.concatenate([layer, np.full(n_mesh, -1.0)])
             ws = cfg.work_stealing
             self.detector = build_collisions(comm, model, layout, self.pipeline_meshes,
                                              self.self_collision, stealing=ws.enabled, a=ws.a,
@@ -497,7 +517,7 @@ class ContactModel:
         found = ReusedCandidates(det.candidates, self.thickness, CANDIDATE_SLACK * self.thickness)
         U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness,
                             self.pipeline_friction, found, hits=det.shared_hits, same=det.same,
-                            keep=self.pipeline_keep)
+                            keep=self.pipeline_keep, priority=self.pipeline_priority)
         mine = self.owned_input
         dU = U2[mine] - U[mine]
         report.impulse_hits = float(sum(stats["ccd_hits"]))

@@ -107,12 +107,13 @@ def _cat(*parts):
 # ------------------------------------------------------------------ the Jacobi pass (numba)
 
 @njit(cache=True)
-def _jacobi_pass(u, inv_mass, ids, coef, normal, target, mu, du):
+def _jacobi_pass(u, wpair, ids, coef, normal, target, mu, du):
     """One Jacobi pass: pair p wants vn >= target[p]; its impulse is
     P = (dvn n - min(mu dvn, |vt|) vt/|vt|) / S (Bridson et al. 2002 §7.1 distribution,
     §7.3 Coulomb friction on the relative tangential velocity vt), scaled by
     1/max active count over its free vertices, accumulated into du in pair
-    order.  Returns the number of active pairs."""
+    order.  ``wpair`` (k, 4): the inverse mass each pair gives its vertices
+    (``pair_weights``).  Returns the number of active pairs."""
     k = ids.shape[0]
     n = u.shape[0]
     P = np.zeros((k, 3))
@@ -126,8 +127,8 @@ def _jacobi_pass(u, inv_mass, ids, coef, normal, target, mu, du):
             i = ids[p, j]
             c = coef[p, j]
             vr0 += c * u[i, 0]; vr1 += c * u[i, 1]; vr2 += c * u[i, 2]
-            S += c * c * inv_mass[i]
-            wmax = max(wmax, inv_mass[i])
+            S += c * c * wpair[p, j]
+            wmax = max(wmax, wpair[p, j])
         n0 = normal[p, 0]; n1 = normal[p, 1]; n2 = normal[p, 2]
         vn = vr0 * n0 + vr1 * n1 + vr2 * n2
         dvn = target[p] - vn
@@ -141,7 +142,7 @@ def _jacobi_pass(u, inv_mass, ids, coef, normal, target, mu, du):
         P[p, 2] = (dvn * n2 - f * t2) / S
         active[p] = True
         for j in range(4):
-            if coef[p, j] != 0.0 and inv_mass[ids[p, j]] > 0.0:
+            if coef[p, j] != 0.0 and wpair[p, j] > 0.0:
                 count[ids[p, j]] += 1
     nact = 0
     for p in range(k):
@@ -151,11 +152,11 @@ def _jacobi_pass(u, inv_mass, ids, coef, normal, target, mu, du):
         cmax = 1
         for j in range(4):
             i = ids[p, j]
-            if coef[p, j] != 0.0 and inv_mass[i] > 0.0:
+            if coef[p, j] != 0.0 and wpair[p, j] > 0.0:
                 cmax = max(cmax, count[i])
         for j in range(4):
             i = ids[p, j]
-            w = coef[p, j] * inv_mass[i] / cmax
+            w = coef[p, j] * wpair[p, j] / cmax
             if w != 0.0:
                 du[i, 0] += w * P[p, 0]
                 du[i, 1] += w * P[p, 1]
@@ -163,10 +164,29 @@ def _jacobi_pass(u, inv_mass, ids, coef, normal, target, mu, du):
     return nact
 
 
-def _apply(u, inv_mass, ids, coef, normal, target, mu):
+def pair_weights(inv_mass, ids, priority=None):
+    """(k, 4) the inverse mass each pair gives its vertices: their own, or
+    with ``priority`` (n,) per vertex, zero for the vertices of a pair below
+    its highest priority (while one of the highest stays free).  Layered
+    garments give each cloth its layer: a pair between an inner and an outer
+    layer moves only the outer one, so the inner layer is an obstacle to the
+    outer as the body is to the inner, and the response between layers
+    cannot push the inner layer into the body: a stack of layers is
+    resolved from the body outwards (docs/garments.md, "Layers")."""
+    w = np.ascontiguousarray(inv_mass[ids], dtype=np.float64)
+    if priority is None or ids.shape[0] == 0:
+        return w
+    pr = np.asarray(priority)[ids]
+    top = pr == pr.max(axis=1, keepdims=True)
+    lowered = np.where(top, w, 0.0)
+    free_top = lowered.max(axis=1) > 0.0
+    return np.ascontiguousarray(np.where(free_top[:, None], lowered, w))
+
+
+def _apply(u, inv_mass, ids, coef, normal, target, mu, priority=None):
     du = np.zeros_like(u)
-    nact = _jacobi_pass(u, inv_mass, ids, coef, normal, np.ascontiguousarray(target, dtype=np.float64),
-                        float(mu), du)
+    nact = _jacobi_pass(u, pair_weights(inv_mass, ids, priority), ids, coef, normal,
+                        np.ascontiguousarray(target, dtype=np.float64), float(mu), du)
     out = u + du
     kin = inv_mass == 0
     out[kin] = u[kin]                     # bitwise: kinematic rows are prescribed
@@ -196,7 +216,7 @@ def pair_thickness(ids, coef, thickness, keep=None):
 # ------------------------------------------------------------------ 1. proximity repulsion
 
 def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, iterations=4,
-              keep=None):
+              keep=None, priority=None):
     """Proximity response at x0 (Bridson et al. 2002 §7.2, friction §7.3) for the contacts
     ``vf`` / ``ee`` (proximity.py NamedTuples, distance < thickness).
 
@@ -207,15 +227,15 @@ def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, i
     the full overlap as target).  Friction reduces the relative tangential
     velocity by at most ``friction * dvn``.  ``iterations`` Jacobi passes
     (pairs already satisfied are inactive).  ``keep`` (n,): per-vertex
-    distances that replace ``thickness`` as the target (``resolve``).
-    Returns the new u."""
+    distances that replace ``thickness`` as the target (``resolve``);
+    ``priority`` (n,): see ``pair_weights``.  Returns the new u."""
     x0, u, inv_mass, tri, edges = _prep(x0, u, inv_mass, tri, edges)
     ids, coef, nrm = _cat(_vf_stencil(tri, vf.vertex, vf.face, vf.weights) + (vf.normal,),
                           _ee_stencil(edges, ee.edge_a, ee.edge_b, ee.params) + (ee.normal,))
     target = (pair_thickness(ids, coef, thickness, keep)
               - np.concatenate([vf.distance, ee.distance])) / h
     for _ in range(iterations):
-        u, nact = _apply(u, inv_mass, ids, coef, nrm, target, friction)
+        u, nact = _apply(u, inv_mass, ids, coef, nrm, target, friction, priority)
         if nact == 0:
             break
     return u
@@ -238,7 +258,7 @@ def collisions(x0, x1, tri, edges, vf_pairs, ee_pairs, eta, with_rows=False):
 
 
 def ccd_impulses(x0, u, h, inv_mass, tri, edges, vf_pairs, ee_pairs, thickness,
-                 eta=None, margin=0.01, sweeps=8, hits=collisions, keep=None):
+                 eta=None, margin=0.01, sweeps=8, hits=collisions, keep=None, priority=None):
     """One detection pass over the CCD hits of the candidates on
     x0 -> x0 + h u, answered with inelastic impulses (Bridson et al. 2002 §7.1).  For a hit with normal n and
     start gap g0 = n . sum c_j x0_j the relative normal velocity is raised to
@@ -264,7 +284,7 @@ def ccd_impulses(x0, u, h, inv_mass, tri, edges, vf_pairs, ee_pairs, thickness,
     th = pair_thickness(ids, coef, thickness, keep)
     target = (np.clip(g0, 0.0, th) - g0 + margin * th) / h
     for _ in range(sweeps):
-        u, nact = _apply(u, inv_mass, ids, coef, nrm, target, 0.0)
+        u, nact = _apply(u, inv_mass, ids, coef, nrm, target, 0.0, priority)
         if nact == 0:
             break
     return u, int(ids.shape[0])
@@ -458,7 +478,8 @@ class ReusedCandidates:
 
 def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
             max_ccd_iterations=10, max_zone_iterations=100, repulsion_iterations=16,
-            sweeps=8, eta=None, margin=0.01, hits=collisions, same=None, keep=None):
+            sweeps=8, eta=None, margin=0.01, hits=collisions, same=None, keep=None,
+            priority=None):
     """The Bridson et al. 2002 §3 pipeline on the average velocity u of a step:
 
     1. proximity at x0 (pairs closer than ``thickness``) -> ``repulsion``;
@@ -485,6 +506,10 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
     from the body's vertices lifted it every step, for the contact to put
     its corners back the next.
 
+    ``priority`` (n,): which vertex of a pair the repulsion and the CCD
+    impulses move (``pair_weights``; the impact zones, a last resort,
+    rigidify with the true masses).
+
     Returns (u_new, stats): proximity_pairs, ccd_hits (per pass), zones,
     zone_vertices, zone_iterations, remaining (CCD hits of u_new, 0 unless
     the zone iteration cap was hit)."""
@@ -494,14 +519,14 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
     pvf = vertex_face_contacts(x0, tri, vf, thickness)
     pee = edge_edge_contacts(x0, edges, ee, thickness)
     u = repulsion(x0, u, h, inv_mass, tri, edges, pvf, pee, thickness, friction,
-                  repulsion_iterations, keep)
+                  repulsion_iterations, keep, priority)
     stats = {"proximity_pairs": int(pvf.vertex.size + pee.edge_a.size), "ccd_hits": [],
              "zones": 0, "zone_vertices": 0, "zone_iterations": 0, "remaining": 0}
     n_hits = 1
     for _ in range(max_ccd_iterations):
         vf, ee = clean_pairs(*candidates(x0, x0 + h * u), tri, edges, inv_mass, same)
         u, n_hits = ccd_impulses(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, eta, margin,
-                                 sweeps, hits, keep)
+                                 sweeps, hits, keep, priority)
         stats["ccd_hits"].append(n_hits)
         if n_hits == 0:
             break

@@ -129,11 +129,14 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
     return v / np.where(n > 0.0, n, 1.0)
 
 
-def _edge_adjacency(tri: np.ndarray, n_vertices: int):
+def _edge_adjacency(tri: np.ndarray, n_vertices: int, cut: bool = False):
     """(closed, adj): adj[f, k] is the face across edge k of face f (edge k
     runs from corner k to corner k+1 mod 3).  closed: every directed edge is
     unique and its reverse exists, i.e. every edge is shared by exactly two
-    triangles with opposite orientation (watertight, consistently oriented)."""
+    triangles with opposite orientation (watertight, consistently oriented).
+    ``cut``: a part cut out of such a mesh; its boundary edges get adj -1 and
+    it counts as closed if every directed edge is unique (consistently
+    oriented)."""
     a = tri.reshape(-1)
     b = tri[:, [1, 2, 0]].reshape(-1)
     key = a * n_vertices + b
@@ -143,7 +146,10 @@ def _edge_adjacency(tri: np.ndarray, n_vertices: int):
     if (ks[1:] == ks[:-1]).any():
         return False, None
     pos = np.minimum(np.searchsorted(ks, rev), ks.shape[0] - 1)
-    if not (ks[pos] == rev).all():
+    found = ks[pos] == rev
+    if cut:
+        return True, np.where(found, srt[pos] // 3, -1).reshape(-1, 3)
+    if not found.all():
         return False, None
     return True, (srt[pos] // 3).reshape(-1, 3)
 
@@ -162,7 +168,10 @@ class MeshProximity:
         self.collider = collider
         self.triangles = np.ascontiguousarray(collider.triangles, dtype=np.int64)
         nv = collider.n_vertices
-        self.closed, self._adj = _edge_adjacency(self.triangles, nv)
+        # a body part cut out of a closed mesh keeps signed distances
+        # (body/regions.py: the cut lies where parts out of the cloth's reach join)
+        self.closed, self._adj = _edge_adjacency(self.triangles, nv,
+                                                 getattr(collider, "cut_of_closed", False))
         self._static = not collider.is_deforming and collider.motion.is_identity
         t0 = float(collider.frame_times[0])
         x0 = np.ascontiguousarray(collider.vertices(t0))
@@ -262,7 +271,8 @@ class MeshProximity:
         if self.closed:
             edge = np.flatnonzero(nzero == 1)        # edge k = corners k, k+1: opposite corner k+2
             k = (np.argmax(zero[edge], axis=1) + 1) % 3
-            surf[edge] += fn[self._adj[f[edge], k]]
+            across = self._adj[f[edge], k]            # -1: a cut's boundary, its own face only
+            surf[edge] += fn[np.where(across >= 0, across, f[edge])]
             vert = np.flatnonzero(nzero == 2)
             surf[vert] = vn[vid[vert, np.argmax(wh[vert], axis=1)]]
             sign = np.where(np.einsum("ij,ij->i", e, surf) < 0.0, -1.0, 1.0)

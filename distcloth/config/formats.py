@@ -58,6 +58,12 @@ def read_pattern_file(value: Any, key: str, ctx: Any) -> str:
     return _existing_file(value, key, ctx, PATTERN_SUFFIXES, PATTERN_FILE_TEXT)
 
 
+def read_motion_file(value: Any, key: str, ctx: Any) -> str:
+    """The absolute path of an existing BVH file, relative to the scene file;
+    its contents are checked when the collider is built."""
+    return _existing_file(value, key, ctx, MOTION_SUFFIXES, MOTION_FILE_TEXT)
+
+
 def read_mesh_files(value: Any, key: str, ctx: Any) -> tuple[str, ...]:
     """One OBJ/PLY file (static, or moved by motion) or a list of them (a
     deforming sequence, one file per frame)."""
@@ -135,6 +141,8 @@ MESH_FILE_TEXT = "an existing " + " or ".join(MESH_SUFFIXES) + " file"
 PATTERN_SUFFIXES = (".json", ".yaml", ".yml")
 PATTERN_FILE_TEXT = ("an existing sewing pattern file: " + ", ".join(PATTERN_SUFFIXES)
                      + " (GarmentCode specification or the compact form)")
+MOTION_SUFFIXES = (".bvh",)
+MOTION_FILE_TEXT = "an existing .bvh motion capture file"
 OUTPUT_FILE_TEXT = "a file name ending in " + " or ".join(OUTPUT_SUFFIXES)
 CURVE_TEXT = "a list of [Green strain, stress N/m] pairs from [0, 0], both increasing"
 PETSC_OPTIONS_TEXT = "a mapping of PETSc options without '-' and prefix"
@@ -144,6 +152,7 @@ FORMATS: dict[str, Format] = {
     "pattern_file": Format(read_pattern_file, PATTERN_FILE_TEXT),
     "mesh_files": Format(read_mesh_files, f"{MESH_FILE_TEXT}, or a non-empty list of them",
                          dump=_dump_mesh_files),
+    "motion_file": Format(read_motion_file, MOTION_FILE_TEXT),
     "output_file": Format(read_output_file, OUTPUT_FILE_TEXT),
     "curve": Format(read_curve, CURVE_TEXT),
     "petsc_options": Format(read_petsc_options, PETSC_OPTIONS_TEXT, dump=dict, any_key=True),

@@ -21,6 +21,9 @@ COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box", "mesh")
 COLLIDER_METHODS = ("bvh", "image")   # mesh colliders: BVH closest points or image-space maps
 IMAGE_AXES = ("x", "y", "z")
 UP_AXES = ("y", "z")                   # a mesh collider file's up axis
+SKINNING_METHODS = ("dqs", "lbs")      # dual-quaternion or linear blend skinning
+ROOT_MOTIONS = ("keep", "remove")      # a clip's travel: kept, or walked in place
+CMU_UNIT = 0.0254 / 0.45               # m per length unit of the CMU database's BVH conversions
 # the geometry keys of each collider shape (all required)
 SHAPE_KEYS = {"plane": ("normal", "offset"), "sphere": ("center", "radius"),
               "capsule": ("a", "b", "radius"), "box": ("center", "half_extents"),
@@ -259,6 +262,47 @@ class MotionSpec:
 
 
 @dataclass(frozen=True)
+class AnimationSpec:
+    """A body mesh that moves by motion capture (docs/bodies.md): a skeleton
+    fitted to the mesh, bone-heat skinning weights, the clip's joint
+    rotations retargeted to that skeleton, the mesh skinned at every step
+    (one vertex array, the BVH refit).  Scene time: the body holds its rest
+    pose for settle seconds, blends into the clip's first pose over
+    blend_in, plays the clip (its speed eased in over ease_in), then holds
+    the last pose or blends back to rest over blend_out."""
+    motion: str = setting(doc="a BVH motion capture file (any joint hierarchy and channel "
+                          "order; its joints are mapped to the body's by the CMU database's "
+                          "names), relative to the scene file", read="motion_file")
+    units: float = setting(CMU_UNIT, doc="metres per length unit of the file (the CMU "
+                           "database's BVH conversions: 0.0254/0.45); the clip's travel is then "
+                           "scaled to the body by the ratio of hip heights", unit="m", above=0)
+    skinning: str = choice("dqs", SKINNING_METHODS, doc="dqs: dual-quaternion skinning (Kavan "
+                           "et al. 2008; keeps a twisted limb's volume); lbs: linear blend "
+                           "skinning (a twisted wrist collapses: the candy wrapper)")
+    root_motion: str = choice("keep", ROOT_MOTIONS, doc="keep: the body travels as captured; "
+                              "remove: it walks in place (the root's horizontal travel taken out)")
+    speed: float = setting(1.0, doc="playback speed (1: as captured)", above=0, at_most=10)
+    clip_start: float = setting(0.0, doc="clip time played first (a CMU file's frame 0 is a "
+                                "reference pose, not part of the motion: 0.0084 skips it)",
+                                unit="s", at_least=0)
+    clip_end: float | None = setting(None, doc="clip time played last; null: the clip's end",
+                                     unit="s", above=0)
+    settle: float = setting(0.0, doc="time the body holds its rest pose first (a garment is "
+                            "sewn and settles meanwhile)", unit="s", at_least=0)
+    blend_in: float = setting(0.5, doc="time over which the pose goes from rest to the clip's "
+                              "first played pose", unit="s", at_least=0)
+    ease_in: float = setting(0.3, doc="time over which the playback speed rises from 0 (the "
+                             "body's velocity stays continuous where the clip starts)", unit="s",
+                             at_least=0)
+    blend_out: float = setting(0.0, doc="time over which the pose returns to rest after the clip; "
+                               "0: the last pose is held", unit="s", at_least=0)
+    reach: float | None = setting(None, doc="bvh method: the body parts (bones) whose skin is "
+                                  "within this distance of the cloth where it starts are the only "
+                                  "ones in its contact (EG07 tutorial Part 2 §2.3; a skirt never "
+                                  "tests the arms); null: the whole body", unit="m", above=0)
+
+
+@dataclass(frozen=True)
 class ColliderGeometry:
     """The geometry keys of the shapes, written in the collider's own mapping;
     each shape takes exactly its own (SHAPE_KEYS, and a mesh its optional center)."""
@@ -324,6 +368,9 @@ class ColliderSpec:
                                           at_least=8, at_most=8192, only=IMAGE_ONLY)
     axis: str = choice("z", IMAGE_AXES, doc="image-space projection axis", only=IMAGE_ONLY)
     motion: MotionSpec | None = setting(None, doc="rigid keyframes; null: at rest")
+    animation: AnimationSpec | None = setting(None, doc="mesh: skinned by motion capture (one "
+                                              "file, not a sequence); null: not animated",
+                                              only=MESH_ONLY)
 
 
 @dataclass(frozen=True)

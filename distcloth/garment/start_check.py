@@ -127,7 +127,7 @@ def _segment_crossing(p, q, a, b, c):
 
 
 @njit(cache=True)
-def _segment_hits_box(p, inv, lo, hi, i):
+def segment_hits_box(p, inv, lo, hi, i):
     """Slab test of the segment p + t d, t in [0, 1] (inv = 1/d, inf for a
     zero component) against box i."""
     t0 = 0.0
@@ -161,7 +161,7 @@ def _ray_count(p, q, x, tri, lo, hi, left, right, first, count, order, plo, phi,
     while top > 0:
         top -= 1
         node = stack[top]
-        if not _segment_hits_box(p, inv, lo, hi, node):
+        if not segment_hits_box(p, inv, lo, hi, node):
             continue
         l = left[node]
         if l >= 0:
@@ -171,7 +171,7 @@ def _ray_count(p, q, x, tri, lo, hi, left, right, first, count, order, plo, phi,
             continue
         for j in range(first[node], first[node] + count[node]):
             f = order[j]
-            if not _segment_hits_box(p, inv, plo, phi, f):
+            if not segment_hits_box(p, inv, plo, phi, f):
                 continue
             s = _segment_crossing(p, q, x[tri[f, 0]], x[tri[f, 1]], x[tri[f, 2]])
             if s == 2:

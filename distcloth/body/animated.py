@@ -1,0 +1,90 @@
+"""A body mesh driven by motion capture: rigged once, skinned at any time.
+
+``AnimatedBody`` fits the skeleton to the mesh (skeleton_fit.py), computes
+bone-heat weights (skinning_weights.py), retargets the clip to the skeleton
+(retarget.py) and answers "where is every vertex at t, how fast is it
+moving": the skinned positions (skinning.py) and their central differences
+over ``VELOCITY_DT``, so contact and friction see the moving skin.  Poses
+are cached per time: a step queries the same t several times.
+"""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from .bvh import BvhClip
+from .clip import Timeline
+from .retarget import LIMB_JOINTS, BodyMotion
+from .skeleton_fit import fit_skeleton
+from .skinning import skin
+from .skinning_weights import skinning_weights
+
+# half the interval of the central difference for skin velocities: well under
+# a capture frame (8.3 ms at 120 Hz), so a velocity is that of the frame's
+# interpolation, yet far above round-off of metre-sized positions
+VELOCITY_DT = 1.0e-4
+
+
+class AnimatedBody:
+    """Rest vertices (V, 3) and triangles of a body in its file's frame (y up,
+    metres), the clip on a ``Timeline``, a skinning method ("dqs" or "lbs").
+
+    ``aligned``: the joints whose rest bone is aligned to the capture's
+    (retarget.py); the limbs by default, so the body's torso keeps its own
+    posture instead of taking the capture skeleton's spine curve."""
+
+    def __init__(self, vertices, triangles, clip: BvhClip, timeline: Timeline, method: str = "dqs",
+                 root_motion: str = "keep", aligned=LIMB_JOINTS):
+        self.rest = np.ascontiguousarray(vertices, dtype=np.float64)
+        self.triangles = np.asarray(triangles, dtype=np.int64)
+        self.method = method
+        self.skeleton = fit_skeleton(self.rest, self.triangles)
+        self.idx, self.w = skinning_weights(self.rest, self.triangles, self.skeleton)
+        self.motion = BodyMotion(clip, self.skeleton, timeline, root_motion, aligned=aligned)
+        self.end_time = float(self.motion.end_time)
+        self.clear_cache()
+
+    def part(self, ids, triangles) -> "AnimatedBody":
+        """The same rig and motion on the vertices ``ids`` only, with
+        ``triangles`` indexing them (regions.py): only they are skinned."""
+        part = copy.copy(self)
+        part.rest, part.idx, part.w = self.rest[ids], self.idx[ids], self.w[ids]
+        part.triangles = np.asarray(triangles, dtype=np.int64)
+        part.clear_cache()
+        return part
+
+    def clear_cache(self) -> None:
+        """Forget the cached poses (a part has its own vertices)."""
+        self._positions, self._velocities = {}, {}
+
+    def positions_at(self, times) -> np.ndarray:
+        """Skinned vertices (F, V, 3) at scene times (F,)."""
+        R, t = self.motion.transforms(np.atleast_1d(np.asarray(times, dtype=np.float64)))
+        out = np.empty((R.shape[0],) + self.rest.shape)
+        # the rest pose exactly where the body holds it (skinning's round-off
+        # would make a resting body "move" by 1e-17 m), and not skinned at all
+        still = (R == np.eye(3)).all(axis=(1, 2, 3)) & (np.abs(t) < 1e-12).all(axis=(1, 2))
+        out[still] = self.rest
+        if not still.all():
+            out[~still] = skin(self.method, self.rest, self.idx, self.w, R[~still], t[~still])
+        return out
+
+    def _cached(self, cache: dict, t: float, compute) -> np.ndarray:
+        value = cache.get(t)
+        if value is None:
+            if len(cache) > 8:          # a step asks for two or three times
+                cache.clear()
+            value = cache[t] = compute(t)
+        return value
+
+    def positions(self, t: float) -> np.ndarray:
+        return self._cached(self._positions, float(t), lambda s: self.positions_at([s])[0])
+
+    def velocities(self, t: float) -> np.ndarray:
+        """Skin velocities (V, 3) at t: central differences (zero where the
+        body holds a pose)."""
+        def central(s):
+            a, b = self.positions_at([s - VELOCITY_DT, s + VELOCITY_DT])
+            return (b - a) / (2.0 * VELOCITY_DT)
+        return self._cached(self._velocities, float(t), central)
