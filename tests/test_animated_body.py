@@ -158,6 +158,8 @@ def test_cloth_rides_the_walking_shoulder(shared_tmp, comm, reach):
     ("colliders.0.animation.motion=BAD", "colliders.0.animation.motion"),
     ("colliders.0.animation.clip_start=100", "colliders.0.animation"),
     ("colliders.0.animation.skinning=quaternion", "colliders.0.animation.skinning"),
+    ("colliders.0.animation.joints.pelvis=Hipz", "colliders.0.animation.joints"),
+    ("colliders.0.animation.joints.tail=Hips", "colliders.0.animation.joints.tail"),
 ])
 def test_bad_animation_exits_2_before_work(tmp_path, setting, key):
     bad = tmp_path / "bad.bvh"

@@ -30,18 +30,20 @@ class AnimatedBody:
     """Rest vertices (V, 3) and triangles of a body in its file's frame (y up,
     metres), the clip on a ``Timeline``, a skinning method ("dqs" or "lbs").
 
-    ``aligned``: the joints whose rest bone is aligned to the capture's
+    ``mapping``: body joint -> capture joint names replacing the CMU ones
+    (retarget.py).  ``aligned``: the joints whose rest bone is aligned to the capture's
     (retarget.py); the limbs by default, so the body's torso keeps its own
     posture instead of taking the capture skeleton's spine curve."""
 
     def __init__(self, vertices, triangles, clip: BvhClip, timeline: Timeline, method: str = "dqs",
-                 root_motion: str = "keep", aligned=LIMB_JOINTS):
+                 root_motion: str = "keep", aligned=LIMB_JOINTS, mapping=None):
         self.rest = np.ascontiguousarray(vertices, dtype=np.float64)
         self.triangles = np.asarray(triangles, dtype=np.int64)
         self.method = method
         self.skeleton = fit_skeleton(self.rest, self.triangles)
         self.idx, self.w = skinning_weights(self.rest, self.triangles, self.skeleton)
-        self.motion = BodyMotion(clip, self.skeleton, timeline, root_motion, aligned=aligned)
+        self.motion = BodyMotion(clip, self.skeleton, timeline, root_motion, mapping=mapping,
+                                 aligned=aligned)
         self.end_time = float(self.motion.end_time)
         self.clear_cache()
 

@@ -70,6 +70,10 @@ LIMB_JOINTS = ("l_shoulder", "l_elbow", "r_shoulder", "r_elbow", "l_hip", "l_kne
 UP = np.array([0.0, 1.0, 0.0])
 
 
+class MappingError(ValueError):
+    """A body joint the capture has no (suitable) joint for."""
+
+
 def resolve_mapping(clip: BvhClip, skeleton: Skeleton,
                     mapping: Mapping[str, str | tuple[str, ...]] | None = None) -> np.ndarray:
     """(J_body,) capture joint index of every body joint.  ``mapping`` entries
@@ -79,18 +83,18 @@ def resolve_mapping(clip: BvhClip, skeleton: Skeleton,
     merged = {k: v for k, v in CMU_MAPPING.items()}
     for key, value in (mapping or {}).items():
         if key not in skeleton.names:
-            raise ValueError(f"retarget mapping: {key!r} is not a body joint (joints: {', '.join(skeleton.names)})")
+            raise MappingError(f"retarget mapping: {key!r} is not a body joint (joints: {', '.join(skeleton.names)})")
         merged[key] = (value,) if isinstance(value, str) else tuple(value)
     index = np.empty(len(skeleton.names), dtype=np.int64)
     for j, name in enumerate(skeleton.names):
         found = [c for c in merged.get(name, ()) if c in clip.names]
         if not found:
-            raise ValueError(f"retarget mapping: body joint {name!r} -> {' or '.join(merged.get(name, ('?',)))}, "
+            raise MappingError(f"retarget mapping: body joint {name!r} -> {' or '.join(merged.get(name, ('?',)))}, "
                              f"not a joint of the capture (joints: {', '.join(clip.names)})")
         index[j] = clip.index(found[0])
     for j, p in enumerate(skeleton.parents):
         if p >= 0 and not _descends(clip, index[j], index[p]):
-            raise ValueError(f"retarget mapping: {clip.names[index[j]]!r} (body {skeleton.names[j]}) does not "
+            raise MappingError(f"retarget mapping: {clip.names[index[j]]!r} (body {skeleton.names[j]}) does not "
                              f"descend from {clip.names[index[p]]!r} (body {skeleton.names[p]})")
     return index
 

@@ -16,6 +16,7 @@ from typing import Any
 
 from .checks import join, read_float, read_list, read_str, read_vector
 from .describe import entries
+from ..body.skeleton import JOINT_NAMES
 from .schema import DEFAULT_SOLVER, OPTION_PREFIX, ConfigError, LinearSystemSpec, SceneConfig
 
 MESH_SUFFIXES = (".obj", ".ply")
@@ -62,6 +63,20 @@ def read_motion_file(value: Any, key: str, ctx: Any) -> str:
     """The absolute path of an existing BVH file, relative to the scene file;
     its contents are checked when the collider is built."""
     return _existing_file(value, key, ctx, MOTION_SUFFIXES, MOTION_FILE_TEXT)
+
+
+def read_joint_map(value: Any, key: str, ctx: Any) -> tuple[tuple[str, str], ...]:
+    """Body joint -> capture joint name: the body's joints (a fixed list),
+    any names on the capture's side (checked against the file when the
+    collider is built)."""
+    if not isinstance(value, dict):
+        raise ConfigError(key, value, JOINT_MAP_TEXT)
+    out = []
+    for name, joint in value.items():
+        if name not in JOINT_NAMES:
+            raise ConfigError(join(key, name), joint, f"a body joint: one of {' | '.join(JOINT_NAMES)}")
+        out.append((name, read_str(joint, join(key, name), "a joint name of the motion file")))
+    return tuple(out)
 
 
 def read_mesh_files(value: Any, key: str, ctx: Any) -> tuple[str, ...]:
@@ -141,6 +156,7 @@ MESH_FILE_TEXT = "an existing " + " or ".join(MESH_SUFFIXES) + " file"
 PATTERN_SUFFIXES = (".json", ".yaml", ".yml")
 PATTERN_FILE_TEXT = ("an existing sewing pattern file: " + ", ".join(PATTERN_SUFFIXES)
                      + " (GarmentCode specification or the compact form)")
+JOINT_MAP_TEXT = "a mapping of body joints to the motion file's joint names"
 MOTION_SUFFIXES = (".bvh",)
 MOTION_FILE_TEXT = "an existing .bvh motion capture file"
 OUTPUT_FILE_TEXT = "a file name ending in " + " or ".join(OUTPUT_SUFFIXES)
@@ -153,6 +169,7 @@ FORMATS: dict[str, Format] = {
     "mesh_files": Format(read_mesh_files, f"{MESH_FILE_TEXT}, or a non-empty list of them",
                          dump=_dump_mesh_files),
     "motion_file": Format(read_motion_file, MOTION_FILE_TEXT),
+    "joint_map": Format(read_joint_map, JOINT_MAP_TEXT, dump=dict, any_key=True),
     "output_file": Format(read_output_file, OUTPUT_FILE_TEXT),
     "curve": Format(read_curve, CURVE_TEXT),
     "petsc_options": Format(read_petsc_options, PETSC_OPTIONS_TEXT, dump=dict, any_key=True),

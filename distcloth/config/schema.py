@@ -273,6 +273,11 @@ class AnimationSpec:
     motion: str = setting(doc="a BVH motion capture file (any joint hierarchy and channel "
                           "order; its joints are mapped to the body's by the CMU database's "
                           "names), relative to the scene file", read="motion_file")
+    joints: tuple[tuple[str, str], ...] = setting((), doc="body joint -> the motion file's joint "
+                                                 "driving it, for files not named like the CMU "
+                                                 "database's (docs/bodies.md lists the body's "
+                                                 "joints and the CMU names); given joints "
+                                                 "replace the CMU names", read="joint_map")
     units: float = setting(CMU_UNIT, doc="metres per length unit of the file (the CMU "
                            "database's BVH conversions: 0.0254/0.45); the clip's travel is then "
                            "scaled to the body by the ratio of hip heights", unit="m", above=0)

@@ -6,6 +6,7 @@ from ..body.animated import AnimatedBody
 from ..body.bvh import read_bvh
 from ..body.clip import Timeline
 from ..body.regions import reachable_bones, region_triangles, submesh
+from ..body.retarget import MappingError
 from ..collision.colliders import RigidMotion, SkinnedMeshCollider, placement_map
 from ..config.schema import ConfigError
 from .meshio import read_mesh
@@ -34,8 +35,11 @@ def load_animated_collider(spec, key: str, motion: RigidMotion | None = None) ->
     vertices, triangles = read_mesh(spec.files[0])
     try:
         body = AnimatedBody(vertices, triangles, clip, timeline, method=anim.skinning,
-                            root_motion=anim.root_motion)
-    except ValueError as exc:       # a mesh the rig cannot be fitted to, a skeleton it lacks
+                            root_motion=anim.root_motion, mapping=dict(anim.joints))
+    except MappingError as exc:     # a body joint the capture has no joint for
+        raise ConfigError(f"{key}.animation.joints", dict(anim.joints),
+                          f"capture joints of {anim.motion} ({exc})") from None
+    except ValueError as exc:       # a mesh the rig cannot be fitted to
         raise ConfigError(f"{key}.file", spec.files[0], f"a body mesh that can be rigged ({exc})") from None
     A, b = placement_map(spec, body.rest)
     return SkinnedMeshCollider(body, A, b, motion, spec.friction, spec.thickness)
