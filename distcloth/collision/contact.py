@@ -47,6 +47,7 @@ from typing import Callable
 import numpy as np
 
 from ..parallel.collide import build_collisions
+from ..config.schema import ConfigError
 from ..physics.contact_friction import ContactFrictionTerm
 from ..scene.animated_body import load_animated_collider, reachable_part
 from .colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane, RigidMotion,
@@ -126,6 +127,9 @@ def make_collider(spec, implicit: bool, key: str = "colliders", garment_points=N
         return Collider(kind="analytic", query=lambda x, t, maxd: body.query(x, t), body=body,
                         law=friction_law("analytic", implicit), drive_end=drive_end, **common)
     if spec.animation is not None:
+        if spec.method == "image" and spec.animation.reach is not None:
+            raise ConfigError(f"{key}.animation.reach", spec.animation.reach,
+                              "null with method: image (the maps are of the whole body)")
         mesh = load_animated_collider(spec, key, motion)
         drive_end = max(drive_end, mesh.drive_end)
     else:
