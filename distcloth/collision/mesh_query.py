@@ -171,7 +171,7 @@ class MeshProximity:
         # a body part cut out of a closed mesh keeps signed distances
         # (body/regions.py: the cut lies where parts out of the cloth's reach join)
         self.closed, self._adj = _edge_adjacency(self.triangles, nv,
-                                                 getattr(collider, "cut_of_closed", False))
+                                                 collider.cut_of_closed)
         self._static = not collider.is_deforming and collider.motion.is_identity
         t0 = float(collider.frame_times[0])
         x0 = np.ascontiguousarray(collider.vertices(t0))
