@@ -18,11 +18,12 @@ import numpy as np
 import pytest
 
 from distcloth.body.bvh import CMU_SCALE, bvh_global, parse_bvh, read_bvh, rest_positions
-from distcloth.body.clip import (Timeline, quat_from_matrix, matrix_from_quat, remove_root_motion,
+from distcloth.body.clip import (Timeline, remove_root_motion,
                                  sample, smoothstep, trim)
 from distcloth.body.retarget import (BodyMotion, LIMB_JOINTS, facing_rotation, make_retargeting,
                                      resolve_mapping, retarget_pose, skinning_transforms)
 from distcloth.body.skeleton import JOINT_NAMES, skeleton_from_positions
+from distcloth.rotations import matrix_from_quat, quat_from_matrix
 
 CMU_FILE = Path("/work/shared/data/mocap/cmu_07_01_walk.bvh")
 

@@ -17,10 +17,11 @@ import pytest
 from distcloth.body.skeleton import JOINT_NAMES
 from distcloth.body.skeleton_fit import fit_skeleton, sections
 from distcloth.body.skinning import (axis_angle_matrix, candy_wrapper, dual_quaternion,
-                                     linear_blend, mesh_volume, quaternion_from_matrix, skin)
+                                     linear_blend, mesh_volume, skin)
 from distcloth.body.skinning_weights import (bone_heat, bone_segments, dense_weights,
                                              skinning_weights, visible_bone)
 from distcloth.garment.start_check import ClosedMesh
+from distcloth.rotations import quat_from_matrix
 from distcloth.scene.meshio import read_mesh
 from meshes import icosphere
 
@@ -81,7 +82,7 @@ def test_quaternion_from_matrix_round_trip():
     R = np.concatenate([random_rotations(rng, 50),
                         [axis_angle_matrix([1, 0, 0], np.pi), axis_angle_matrix([0, 1, 1], np.pi),
                          np.eye(3)]])
-    q = quaternion_from_matrix(R)
+    q = quat_from_matrix(R)
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, rtol=0, atol=1e-15)
     # rounding of products of O(1) entries: 1e-14 leaves a decade of margin
     np.testing.assert_allclose(matrix_of_quaternion(q), R, rtol=0, atol=1e-14)

@@ -28,54 +28,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..rotations import matrix_from_quat, quat_from_matrix
 from .bvh import BvhClip
 
-ROOT_MOTIONS = ("keep", "remove")
+ROOT_MOTIONS = ("keep", "remove")      # a clip's travel: kept, or walked in place
 
 
 # --- quaternions (w, x, y, z), unit, acting on column vectors ---------------------------
-
-def quat_from_matrix(rot: np.ndarray) -> np.ndarray:
-    """(..., 4) unit quaternions (w, x, y, z), w >= 0, of rotation matrices (..., 3, 3)."""
-    m = np.asarray(rot, dtype=np.float64)
-    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
-    # Shepperd's method: take the largest of 4w², 4x², 4y², 4z² as the pivot
-    cand = np.stack([1.0 + m00 + m11 + m22, 1.0 + m00 - m11 - m22,
-                     1.0 - m00 + m11 - m22, 1.0 - m00 - m11 + m22], axis=-1)
-    pivot = np.argmax(cand, axis=-1)
-    s = 2.0 * np.sqrt(np.maximum(np.take_along_axis(cand, pivot[..., None], -1)[..., 0], 1e-300))
-    d21, d02, d10 = m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]
-    s21, s02, s10 = m[..., 2, 1] + m[..., 1, 2], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 0] + m[..., 0, 1]
-    options = [
-        (0.25 * s, d21 / s, d02 / s, d10 / s),
-        (d21 / s, 0.25 * s, s10 / s, s02 / s),
-        (d02 / s, s10 / s, 0.25 * s, s21 / s),
-        (d10 / s, s02 / s, s21 / s, 0.25 * s),
-    ]
-    q = np.stack(options[0], axis=-1)
-    for k in (1, 2, 3):
-        q = np.where((pivot == k)[..., None], np.stack(options[k], axis=-1), q)
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    return np.where(q[..., :1] < 0.0, -q, q)
-
-
-def matrix_from_quat(q: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotation matrices of quaternions (..., 4) (w, x, y, z), normalised first."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - w * z)
-    out[..., 0, 2] = 2 * (x * z + w * y)
-    out[..., 1, 0] = 2 * (x * y + w * z)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - w * x)
-    out[..., 2, 0] = 2 * (x * z - w * y)
-    out[..., 2, 1] = 2 * (y * z + w * x)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
-
 
 def slerp(q0: np.ndarray, q1: np.ndarray, w) -> np.ndarray:
     """Spherical interpolation of unit quaternions (..., 4) by weights w (broadcast

@@ -33,12 +33,13 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..garment.start_check import boundary_edges
+from ..rotations import quat_from_matrix, quat_mul
 from .skeleton import Skeleton
 from .skeleton_fit import sections
 from .skinning_weights import dense_weights
 
-__all__ = ["linear_blend", "dual_quaternion", "skin", "quaternion_from_matrix",
-           "axis_angle_matrix", "mesh_volume", "candy_wrapper"]
+__all__ = ["linear_blend", "dual_quaternion", "skin", "axis_angle_matrix", "mesh_volume",
+           "candy_wrapper"]
 
 METHODS = ("lbs", "dqs")
 
@@ -67,41 +68,6 @@ def _weights(rest_vertices, idx, w):
     if idx.shape != w.shape or idx.shape[0] != x.shape[0]:
         raise ValueError(f"idx {idx.shape} and w {w.shape} must be (V, k) for V = {x.shape[0]}")
     return x, idx, w
-
-
-def quaternion_from_matrix(R) -> np.ndarray:
-    """Unit quaternions (..., 4) as (w, x, y, z) of rotation matrices
-    (..., 3, 3) (Shepperd's method: the largest of the four squared
-    components is taken from the diagonal, the others from it)."""
-    R = np.asarray(R, dtype=np.float64)
-    m = R
-    tr = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
-    sq = np.stack([1.0 + tr, 1.0 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
-                   1.0 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2],
-                   1.0 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2]], axis=-1)
-    k = np.argmax(sq, axis=-1)
-    s = 0.5 * np.sqrt(np.maximum(np.take_along_axis(sq, k[..., None], -1)[..., 0], 1e-300))
-    f = 0.25 / s
-    a = m[..., 2, 1] - m[..., 1, 2]
-    b = m[..., 0, 2] - m[..., 2, 0]
-    c = m[..., 1, 0] - m[..., 0, 1]
-    xy = m[..., 0, 1] + m[..., 1, 0]
-    xz = m[..., 0, 2] + m[..., 2, 0]
-    yz = m[..., 1, 2] + m[..., 2, 1]
-    cand = np.stack([np.stack([s, a * f, b * f, c * f], -1),
-                     np.stack([a * f, s, xy * f, xz * f], -1),
-                     np.stack([b * f, xy * f, s, yz * f], -1),
-                     np.stack([c * f, xz * f, yz * f, s], -1)], axis=-2)
-    q = np.take_along_axis(cand, k[..., None, None], axis=-2)[..., 0, :]
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-def _qmul(p, q):
-    """Quaternion products (..., 4), (w, x, y, z)."""
-    pw, pv = p[..., :1], p[..., 1:]
-    qw, qv = q[..., :1], q[..., 1:]
-    return np.concatenate([pw * qw - np.sum(pv * qv, axis=-1, keepdims=True),
-                           pw * qv + qw * pv + np.cross(pv, qv)], axis=-1)
 
 
 def axis_angle_matrix(axis, angle: float) -> np.ndarray:
@@ -191,8 +157,8 @@ def dual_quaternion(rest_vertices, idx, w, R, t) -> np.ndarray:
     dominant = np.ascontiguousarray(np.take_along_axis(idx, np.argmax(w, axis=1)[:, None], axis=1)[:, 0])
     out = np.empty((R.shape[0], x.shape[0], 3))
     for f in range(R.shape[0]):
-        qr = quaternion_from_matrix(R[f])                                  # (J, 4)
-        qd = 0.5 * _qmul(np.concatenate([np.zeros((t.shape[1], 1)), t[f]], axis=1), qr)
+        qr = quat_from_matrix(R[f])                                  # (J, 4)
+        qd = 0.5 * quat_mul(np.concatenate([np.zeros((t.shape[1], 1)), t[f]], axis=1), qr)
         _dqs_kernel(x, idx, w, dominant, np.ascontiguousarray(qr), np.ascontiguousarray(qd), out[f])
     return out[0] if single else out
 

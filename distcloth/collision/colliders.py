@@ -25,7 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..rotations import rotation_matrix
+from ..rotations import matrix_from_quat, quat_mul, rotation_matrix
 from ..scene.meshio import read_mesh
 from ..scene.placement import Y_UP_TO_Z_UP, place_frames
 
@@ -48,13 +48,6 @@ def _quat_from_rotvec(rv: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(half), scale * rv], axis=-1)
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, v1 = a[..., :1], a[..., 1:]
-    w2, v2 = b[..., :1], b[..., 1:]
-    return np.concatenate([w1 * w2 - np.sum(v1 * v2, axis=-1, keepdims=True),
-                           w1 * v2 + w2 * v1 + np.cross(v1, v2)], axis=-1)
-
-
 def _quat_log(q: np.ndarray) -> np.ndarray:
     """Rotation vector (angle <= pi) of a unit quaternion: the shortest arc
     (q and -q are the same rotation)."""
@@ -65,17 +58,9 @@ def _quat_log(q: np.ndarray) -> np.ndarray:
     return factor * q[..., 1:]
 
 
-def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
 def rotvec_to_matrix(rv) -> np.ndarray:
     """3x3 rotation of a rotation vector (axis * angle, radians)."""
-    return _quat_to_matrix(_quat_from_rotvec(np.asarray(rv, dtype=np.float64).reshape(3)))
+    return matrix_from_quat(_quat_from_rotvec(np.asarray(rv, dtype=np.float64).reshape(3)))
 
 
 def _check_times(times: np.ndarray, what: str) -> None:
@@ -123,12 +108,12 @@ class RigidMotion:
         rotvecs = (np.zeros((k, 3)) if rotations is None
                    else np.asarray(rotations, dtype=np.float64).reshape(k, 3))
         self._quats = _quat_from_rotvec(rotvecs)
-        self._matrices = np.array([_quat_to_matrix(q) for q in self._quats]).reshape(k, 3, 3)
+        self._matrices = np.array([matrix_from_quat(q) for q in self._quats]).reshape(k, 3, 3)
         if k >= 2:
             h = np.diff(self.times)[:, None]
             conj = self._quats[:-1] * np.array([1.0, -1.0, -1.0, -1.0])
             # body-frame relative rotation of each interval, R_{i+1} = R_i exp(Δ_i)
-            self._deltas = _quat_log(_quat_mul(conj, self._quats[1:]))
+            self._deltas = _quat_log(quat_mul(conj, self._quats[1:]))
             self._linear = np.diff(self.translations, axis=0) / h
             # dR/dt = R_i exp(sΔ) [Δ]x / h  =>  ω_world = R_i Δ / h (constant in the interval)
             self._angular = np.einsum("kij,kj->ki", self._matrices[:-1], self._deltas) / h

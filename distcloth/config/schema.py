@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import MISSING, dataclass
 from typing import Any
 
+from ..body.clip import ROOT_MOTIONS
 from .describe import GIVEN, Only, choice, section, setting
 from .fabrics import FABRICS
 
@@ -22,7 +23,6 @@ COLLIDER_METHODS = ("bvh", "image")   # mesh colliders: BVH closest points or im
 IMAGE_AXES = ("x", "y", "z")
 UP_AXES = ("y", "z")                   # a mesh collider file's up axis
 SKINNING_METHODS = ("dqs", "lbs")      # dual-quaternion or linear blend skinning
-ROOT_MOTIONS = ("keep", "remove")      # a clip's travel: kept, or walked in place
 CMU_UNIT = 0.0254 / 0.45               # m per length unit of the CMU database's BVH conversions
 # the geometry keys of each collider shape (all required)
 SHAPE_KEYS = {"plane": ("normal", "offset"), "sphere": ("center", "radius"),
