@@ -11,11 +11,13 @@ checked like ``--set linear_system.mat_type=aij``.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
 
 from .config import ConfigError, format_config_error, load_config
 from .config.load import command_line_key, own_option_names
+from .io.output_path import check_output_path
 from .linalg.petsc import command_line_options, init_petsc, take_options
 from .parallel.comm import Comm
 from .run import drape, run
@@ -50,6 +52,22 @@ def _looks_like_option(s: str) -> bool:
         return True
 
 
+def _unreadable_options_file(petsc_args: list[str]) -> str | None:
+    """The error line of an ``-options_file``/``-options_file_yaml`` argument that is
+    not a readable file, or None."""
+    for flag, value in zip(petsc_args, petsc_args[1:] + [None]):
+        if flag in ("-options_file", "-options_file_yaml"):
+            if value is None or value.startswith("-"):
+                allowed, value = "a readable PETSc options file after it", None
+            elif not os.path.isfile(value) or not os.access(value, os.R_OK):
+                allowed = "a readable PETSc options file (" + (
+                    "not found" if not os.path.exists(value) else "not a readable file") + ")"
+            else:
+                continue
+            return format_config_error(ConfigError(f"command line {flag}", value, allowed))
+    return None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="distcloth", allow_abbrev=False,
                                 description="Distributed cloth simulation on MPI and PETSc.",
@@ -62,8 +80,10 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("scene", help="scene YAML file")
         s.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                        help="override a config value (checked like the file), e.g. time.step=0.01")
+        s.add_argument("--output", help="HDF5 output file (default: output.file of the scene)")
+        s.add_argument("--overwrite", action="store_true",
+                       help="replace the output file if it exists (refused otherwise)")
         if name in ("run", "drape"):
-            s.add_argument("--output", help="HDF5 output file (default: output.file of the scene)")
             s.add_argument("--quiet", action="store_true", help="no progress or summaries")
         if name == "run":
             s.add_argument("--force", action="store_true",
@@ -79,7 +99,17 @@ def main(argv: list[str] | None = None) -> int:
     ours, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(ours)
 
-    init_petsc(petsc_args)
+    message = _unreadable_options_file(petsc_args)
+    if message is not None:       # PETSc reads it on rank 0 only: the others would wait for it
+        if Comm().rank == 0:
+            print(message, file=sys.stderr, flush=True)
+        return 2
+    try:
+        init_petsc(petsc_args)
+    except Exception as exc:      # PETSc refused its command line, maybe on one rank only
+        Comm().abort_with(format_config_error(ConfigError(
+            "command line PETSc options", " ".join(petsc_args),
+            f"options PETSc can read ({str(exc).strip()})")), 2)
     # out of the database before PETSc could report them as unused options
     own_options = take_options(own_option_names())
     comm = Comm()
@@ -99,8 +129,8 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
         for name, value in (own_options or {}).items():
             if comm.rank == 0:
                 print(format_config_error(ConfigError(
-                    command_line_key(name), value, "a scene setting (linear_system): "
-                    "not taken by distcloth study")), file=sys.stderr, flush=True)
+                    command_line_key(name), value, "a scene setting, given to a study as "
+                    f"--set linear_system.{name}={value}")), file=sys.stderr, flush=True)
             return 2
         return run_study(args, comm)
     cfg, message = None, None
@@ -110,6 +140,9 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
             output = getattr(args, "output", None)
             if output is not None and not output.lower().endswith((".h5", ".hdf5")):
                 raise ConfigError("--output", output, "a file name ending in .h5 or .hdf5")
+            # replacing an existing result: --overwrite (a resumed run appends to it)
+            check_output_path(output or cfg.output.file, "--output" if output else "output.file",
+                              replace=args.overwrite)
         except ConfigError as exc:
             message = format_config_error(exc)
     cfg, message = comm.broadcast((cfg, message))
@@ -118,7 +151,8 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
             print(message, file=sys.stderr, flush=True)
         return 2
     if args.command == "check":
-        return run(cfg, comm, cmdline_options=cmdline_options, check_only=True)
+        return run(cfg, comm, output=args.output, cmdline_options=cmdline_options,
+                   check_only=True)
     if args.command == "drape":
         return drape(cfg, comm, output=args.output, cmdline_options=cmdline_options,
                      quiet=args.quiet)

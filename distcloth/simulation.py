@@ -17,7 +17,7 @@ import numpy as np
 
 from .collision.contact import MAX_CONTACT_PASSES, ContactModel
 from .config.load import command_line_key
-from .config.schema import DEFAULT_SOLVER, ConfigError
+from .config.schema import DEFAULT_SOLVER, OPTION_PREFIX, ConfigError
 from .energy_guard import EnergyGuard, gravity_scale
 from .integrate import make_integrator
 from .io.console import log
@@ -25,7 +25,8 @@ from .linalg.assembly import (assemble_blocks, constraint_impulses, gershgorin_b
                               solve_constrained)
 from .linalg.constraints import Constraints, filter_system
 from .linalg.pattern import BlockPattern
-from .linalg.petsc import current_options, insert_scene_options, remove_options, unused_options
+from .linalg.petsc import (current_options, insert_scene_options, remove_options,
+                           unused_options, unused_unprefixed_options)
 from .linalg.system import LinearSystem, SolverFailure
 from .parallel.comm import partition_on_root
 from .parallel.ghosts import GhostExchange
@@ -64,6 +65,10 @@ class Simulation:
         # checked on the global model, identically on every rank, before any collective
         if np.any(model.vertex_mass <= 0):
             raise ConfigError("cloth", "mesh", "every vertex needs mass: a vertex belongs to no triangle")
+        n_vertices = model.rest_positions.shape[0]
+        if comm.size > n_vertices:
+            raise ConfigError("mpiexec -n", comm.size, f"at most {n_vertices} ranks: the cloth "
+                              f"has {n_vertices} vertices and every rank owns some")
         xadj, adjncy = model.matrix_graph()
         part = partition_on_root(comm, xadj, adjncy)
         self.layout = lay = build_layout(xadj, adjncy, model.spring_vertices, part, comm.rank,
@@ -174,8 +179,15 @@ class Simulation:
             state.energy_reference = self.energy_guard.reference(*self.energies())
         if self.system is None:
             self.check_explicit_step()
+            _refuse_unprefixed_options()
             return
         self._inserted_options = insert_scene_options(self.cfg.solver_options, self._cmdline)
+        options = current_options()
+        if options.get("pc_type") == "gamg" and self.cfg.linear_system.mat_type == "baij":
+            # the scene's own gamg is refused with the config (rules.py): this one is the command line's
+            raise ConfigError(command_line_key("pc_type"), "gamg", "gamg with an aij matrix: "
+                              f"add -{OPTION_PREFIX}mat_type aij "
+                              "(PETSc's GAMG cannot build its graph from the default BAIJ matrix)")
         self.ctx.forces(state.x, state.v, want_jac=True)
         data = self.ctx.assemble(alpha=self.h ** 2, beta=self.h)
         self.system.set_values(filter_system(self.pattern, data, np.zeros((self.n_owned, 3)),
@@ -190,7 +202,9 @@ class Simulation:
             where = command_line_key(name) if name in self._cmdline else f"solver.{name}"
             value = self.cfg.solver_options.get(name, "")
             raise ConfigError(where, value, "not an option of the configured solver "
-                              "(PETSc did not use it: misspelt, or for another solver type)")
+                              "(PETSc did not use it: misspelt, or for another solver type)"
+                              + _EQUALS_HINT * ("=" in name))
+        _refuse_unprefixed_options()
         self.say(f"solver: {self.system.describe()}")
 
     def stiffness_bound(self) -> float:
@@ -516,6 +530,22 @@ class Simulation:
             self.system.destroy()
 
 
+_EQUALS_HINT = "; an option and its value are two words: -name value, not -name=value"
+
+
+def _refuse_unprefixed_options() -> None:
+    """An option without the prefix that PETSc did not read was meant for
+    distcloth's solver (-ksp_monitor for -distcloth_ksp_monitor) or misspelt:
+    refused like an unused prefixed one rather than ignored."""
+    unused = unused_unprefixed_options()
+    if unused:
+        name = unused[0]
+        raise ConfigError(f"command line -{name}", current_options(prefixed=False).get(name) or "",
+                          "not an option PETSc used: distcloth's solver options take the prefix "
+                          f"{OPTION_PREFIX} (-{OPTION_PREFIX}{name.split('=')[0]})"
+                          + _EQUALS_HINT * ("=" in name))
+
+
 def _solver_setup_error(exc, options: dict, cmdline: set) -> ConfigError:
     """One line naming the option PETSc refused (the one whose value its message quotes)."""
     parts = [p.strip() for p in str(exc).split("[0]") if p.strip()]
@@ -524,6 +554,10 @@ def _solver_setup_error(exc, options: dict, cmdline: set) -> ConfigError:
         if str(value) and str(value) in reason:
             where = command_line_key(name) if name in cmdline else f"solver.{name}"
             return ConfigError(where, value, f"PETSc refused it: {reason}")
+    for name in sorted(cmdline):        # a command-line option given without its value
+        if options.get(name) in (None, ""):
+            return ConfigError(command_line_key(name), "", f"a value: PETSc refused the solver "
+                               f"set-up without one ({reason})")
     return ConfigError("solver", "", f"PETSc refused the solver set-up: {reason}")
 
 

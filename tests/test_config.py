@@ -181,9 +181,9 @@ ERRORS = [
      "cloth.0.material.bending_model: 'flexion' — dihedral, isometric, dihedral_shell or isometric_shell with model: fem"),
     ("cloth.0.material", {"stretch": True},
      "cloth.0.material.stretch: true — a finite number > 0"),
-    ("solver", {"pc_type": "gamg"}, "solver.pc_type: 'gamg' — gamg with linear_system.mat_type: aij "
-                                     "(PETSc's GAMG cannot build its graph from the default BAIJ "
-                                     "matrix)"),
+    ("solver", {"pc_type": "gamg"}, "linear_system.mat_type: 'baij' — aij with solver.pc_type: "
+                                     "gamg (PETSc's GAMG cannot build its graph from a BAIJ "
+                                     "matrix, the default)"),
     ("time", {"max_energy_gain": 0}, "time.max_energy_gain: 0 — a finite number > 0"),
     ("time", {"energy_guard": "yes"}, "time.energy_guard: 'yes' — true or false"),
     ("time", {"require_newton_convergence": 1},

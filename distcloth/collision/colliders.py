@@ -25,6 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..config.schema import ConfigError
 from ..rotations import matrix_from_quat, quat_mul, rotation_matrix
 from ..scene.meshio import read_mesh
 from ..scene.placement import Y_UP_TO_Z_UP, place_frames
@@ -427,6 +428,39 @@ class SkinnedMeshCollider(MeshCollider):
         return xdot @ R.T + self.motion.point_velocity(self.vertices(t), t)
 
 
+class MeshFrameError(ValueError):
+    """A frame of a collider mesh (sequence) that cannot be used: ``frame``
+    is its index in the list of files."""
+
+    def __init__(self, frame: int, message: str):
+        self.frame = frame
+        super().__init__(message)
+
+
+def read_mesh_frames(paths: Sequence[str]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Every file of a collider mesh (sequence) read and checked against frame 0:
+    same vertex count, same triangles; raises MeshFrameError naming the frame."""
+    meshes = []
+    for k, path in enumerate(paths):
+        try:
+            meshes.append(read_mesh(path))
+        except OSError as exc:
+            raise MeshFrameError(k, f"cannot read it: {exc.strerror or exc}") from None
+        except ValueError as exc:       # MeshFormatError
+            raise MeshFrameError(k, str(exc)) from None
+    v0, tri0 = meshes[0]
+    for k, (v, tri) in enumerate(meshes[1:], start=1):
+        if v.shape[0] != v0.shape[0]:
+            raise MeshFrameError(k, f"mesh sequence: frame {k} ({paths[k]}) has {v.shape[0]} "
+                                 f"vertices but frame 0 ({paths[0]}) has {v0.shape[0]}; every "
+                                 f"frame must have the same vertices")
+        if tri.shape != tri0.shape or not np.array_equal(tri, tri0):
+            raise MeshFrameError(k, f"mesh sequence: frame {k} ({paths[k]}) has different "
+                                 f"triangles from frame 0 ({paths[0]}); every frame must have "
+                                 f"the same triangles in the same order")
+    return meshes
+
+
 def load_mesh_collider(paths, frame_times=None, frame_rate: float | None = None,
                        motion: RigidMotion | None = None, friction: float = 0.0,
                        thickness: float = 0.0) -> MeshCollider:
@@ -442,17 +476,8 @@ def load_mesh_collider(paths, frame_times=None, frame_rate: float | None = None,
     paths = [os.fspath(p) for p in paths]
     if not paths:
         raise ValueError("load_mesh_collider: no mesh file given")
-    meshes = [read_mesh(p) for p in paths]
+    meshes = read_mesh_frames(paths)
     v0, tri0 = meshes[0]
-    for k, (v, tri) in enumerate(meshes[1:], start=1):
-        if v.shape[0] != v0.shape[0]:
-            raise ValueError(f"mesh sequence: frame {k} ({paths[k]}) has {v.shape[0]} vertices "
-                             f"but frame 0 ({paths[0]}) has {v0.shape[0]}; every frame must "
-                             f"have the same vertices")
-        if tri.shape != tri0.shape or not np.array_equal(tri, tri0):
-            raise ValueError(f"mesh sequence: frame {k} ({paths[k]}) has different triangles "
-                             f"from frame 0 ({paths[0]}); every frame must have the same "
-                             f"triangles in the same order")
     if len(paths) == 1:
         return MeshCollider.static(v0, tri0, motion, friction, thickness)
     if frame_times is None:
@@ -466,7 +491,16 @@ def load_mesh_collider(paths, frame_times=None, frame_rate: float | None = None,
                                  friction, thickness)
 
 
-def load_collider_mesh(spec, motion: RigidMotion | None = None) -> MeshCollider:
+def collider_file_error(spec, key: str, exc: MeshFrameError) -> ConfigError:
+    """The one-line error of a collider entry (at ``key``) whose mesh file is unusable."""
+    files = list(spec.files)
+    where = f"{key}.file" if len(files) == 1 else f"{key}.file.{exc.frame}"
+    return ConfigError(where, files[exc.frame], f"an OBJ or PLY triangle mesh a collider can "
+                       f"use: {exc}")
+
+
+def load_collider_mesh(spec, motion: RigidMotion | None = None,
+                       key: str = "colliders") -> MeshCollider:
     """The mesh collider a scene's ``colliders:`` entry describes (``shape: mesh``):
     its file or frame sequence, placed, with the entry's rigid ``motion`` on top.
 
@@ -474,9 +508,13 @@ def load_collider_mesh(spec, motion: RigidMotion | None = None) -> MeshCollider:
     (``up_axis: y``) is turned so its +y becomes +z, then scaled, rotated about
     frame 0's bounding-box centre, and moved so that centre lands on ``center``
     or by ``translation`` (scene/placement.py, as for cloth pieces).  The
-    motion's body coordinates are these placed coordinates."""
-    mesh = load_mesh_collider(list(spec.files), frame_rate=spec.frame_rate, motion=motion,
-                              friction=spec.friction, thickness=spec.thickness)
+    motion's body coordinates are these placed coordinates.  A file that
+    cannot be used is a ConfigError naming ``key`` (the entry's key path)."""
+    try:
+        mesh = load_mesh_collider(list(spec.files), frame_rate=spec.frame_rate, motion=motion,
+                                  friction=spec.friction, thickness=spec.thickness)
+    except MeshFrameError as exc:
+        raise collider_file_error(spec, key, exc) from None
     frames = mesh.frames
     if spec.up_axis == "y":
         frames = frames @ Y_UP_TO_Z_UP.T

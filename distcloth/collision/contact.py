@@ -133,7 +133,7 @@ def make_collider(spec, implicit: bool, key: str = "colliders", garment_points=N
         mesh = load_animated_collider(spec, key, motion)
         drive_end = max(drive_end, mesh.drive_end)
     else:
-        mesh = load_collider_mesh(spec, motion)
+        mesh = load_collider_mesh(spec, motion, key)
         drive_end = max(drive_end, float(mesh.frame_times[-1]))
     if spec.method == "image":
         img = ImageSpaceCollider(mesh, resolution=tuple(spec.resolution),

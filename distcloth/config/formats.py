@@ -22,6 +22,9 @@ from .schema import DEFAULT_SOLVER, OPTION_PREFIX, ConfigError, LinearSystemSpec
 MESH_SUFFIXES = (".obj", ".ply")
 OUTPUT_SUFFIXES = (".h5", ".hdf5")
 OPTION_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")  # PETSc names may hold capitals (pc_hypre_boomeramg_P_max)
+# PETSc viewer types that write a file (or open a window or socket) without a file name
+FILE_VIEWER_TYPES = {"binary", "hdf5", "vtk", "draw", "socket", "matlab", "saws", "glvis",
+                     "adios", "exodusii", "mathematica", "cgns"}
 # PyYAML (YAML 1.1) wants a dot in a float: '1e-8' comes back as a string
 YAML11_MISSED_FLOAT = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
 # the scene section of distcloth's own solver settings (the keys solver: once held)
@@ -127,7 +130,21 @@ def read_petsc_options(value: Any, key: str, ctx: Any) -> tuple[tuple[str, Any],
             raise ConfigError(option_key, entry, f"moved: write {LINEAR_SYSTEM}.{name}")
         if entry is not None:
             options[name] = _read_option_value(entry, option_key)
+            if writes_files(options[name]):
+                raise ConfigError(option_key, entry, "not a viewer that writes a file or opens "
+                                  "a window (ascii:PATH, :PATH, binary, hdf5, draw, ...): a scene "
+                                  "cannot make PETSc write files; give it on the command line "
+                                  f"(-{OPTION_PREFIX}{name} {entry})")
     return tuple(options.items())
+
+
+def writes_files(value: Any) -> bool:
+    """Whether a PETSc option value is a viewer that writes a file or opens a
+    window or socket: 'ascii:PATH', ':PATH', 'binary', 'hdf5:PATH', 'draw', ..."""
+    if not isinstance(value, str):
+        return False
+    kind, _, rest = value.partition(":")
+    return kind.strip().lower() in FILE_VIEWER_TYPES or bool(rest.split(":")[0].strip())
 
 
 def _check_option_name(name: Any, key: str, entry: Any) -> None:

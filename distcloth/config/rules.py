@@ -17,6 +17,8 @@ from .schema import (FEM_ONLY, MESH_ONLY, OPTIONAL_SHAPE_KEYS, SHAPE_KEYS, Colli
 from .walk import Context, Rules, read_field, required_text
 
 PER_TIME = ("translations", "rotations")     # MotionSpec keys with one entry per time
+# time.end / time.step may miss a whole number by floating-point rounding only
+STEP_MULTIPLE_TOLERANCE = 1e-6
 
 
 def _pin(pin: PinSpec, section: dict, key: str, ctx: Context) -> PinSpec:
@@ -213,6 +215,14 @@ def _time(time: TimeSpec, section: dict, key: str, ctx: Context) -> TimeSpec:
     if time.step > time.end:
         raise ConfigError(join(key, "step"), time.step,
                           f"a number > 0 and <= time.end ({time.end:g})")
+    steps = time.end / time.step
+    # a run is whole steps: an end between two steps would be rounded without a word
+    if abs(steps - round(steps)) > STEP_MULTIPLE_TOLERANCE * max(1.0, steps):
+        below, above = math.floor(steps), math.ceil(steps)
+        raise ConfigError(join(key, "end"), time.end,
+                          f"a whole number of steps of time.step ({time.step:g} s), e.g. "
+                          f"{below * time.step:.10g} ({below} steps) or {above * time.step:.10g} "
+                          f"({above} steps)")
     return time
 
 
@@ -226,8 +236,9 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
                           f"a number >= time.step ({config.time.step:g}): frames cannot be more "
                           "frequent than steps")
     if config.solver_options.get("pc_type") == "gamg" and config.linear_system.mat_type == "baij":
-        raise ConfigError("solver.pc_type", "gamg", "gamg with linear_system.mat_type: aij "
-                          "(PETSc's GAMG cannot build its graph from the default BAIJ matrix)")
+        raise ConfigError("linear_system.mat_type", "baij", "aij with solver.pc_type: gamg "
+                          "(PETSc's GAMG cannot build its graph from a BAIJ matrix, the "
+                          "default)")
     if "collisions" in config.effects and not config.colliders:
         raise ConfigError("effects", list(config.effects),
                           "the collisions effect needs at least one entry under colliders:")

@@ -27,6 +27,23 @@ SOLVE_TIME_OPTIONS = {
     "ksp_converged_rate", "ksp_error_if_not_converged", "ksp_view_diagonal_scale",
 }
 
+# Options without the prefix that PETSc reads at start-up or at the end (logging,
+# memory checks, error handling, the options files themselves): PetscOptionsUsed
+# does not report them, and they are the only unprefixed options that mean
+# anything to a run whose every PETSc object has the prefix.
+GLOBAL_OPTIONS = {"help", "version", "info", "history", "log_view", "log_all", "log_trace",
+                  "log_summary", "log_sync", "log_exclude", "log_include_actions",
+                  "log_mpe", "log_perfstubs", "memory_view", "objects_dump", "options_left",
+                  "options_file", "options_file_yaml", "options_string_yaml",
+                  "options_monitor", "options_view", "skip_petscrc", "malloc", "malloc_debug",
+                  "malloc_dump", "malloc_test", "malloc_view", "malloc_view_threshold",
+                  "malloc_hbw", "malloc_coalesce", "malloc_requested_size", "on_error_abort",
+                  "on_error_attach_debugger", "on_error_emacs", "start_in_debugger",
+                  "stop_for_debugger", "debugger_ranks", "debugger_pause", "no_signal_handler",
+                  "fp_trap", "check_pointer_intensity", "checkstack", "display", "nox",
+                  "use_gpu_aware_mpi", "viewer_binary_skip_info", "omp_view_frequency",
+                  "mpiuni-allow-multiprocess-launch"}
+GLOBAL_PREFIXES = ("log_view", "malloc_", "info_", "options_", "debugger", "viewer_")
 _initialised = False
 
 
@@ -125,7 +142,27 @@ def unused_options() -> list[str]:
     return out
 
 
-def current_options() -> dict[str, str]:
-    """Every option under the prefix now in the database (name without prefix -> value)."""
+def unused_unprefixed_options() -> list[str]:
+    """Options without the prefix that are neither start-up options (GLOBAL_OPTIONS)
+    nor read by any PETSc object: a distcloth solver option written without its
+    prefix (-ksp_monitor), or a typo; PETSc would ignore them without a word."""
     PETSc = petsc()
-    return {k[len(PREFIX):]: v for k, v in PETSc.Options().getAll().items() if k.startswith(PREFIX)}
+    lib = libpetsc()
+    used = ctypes.c_int(0)
+    out = []
+    for name in sorted(PETSc.Options().getAll()):
+        if name.startswith(PREFIX) or name in GLOBAL_OPTIONS or name.startswith(GLOBAL_PREFIXES):
+            continue
+        if lib is not None and lib.PetscOptionsUsed(None, ("-" + name).encode(),
+                                                     ctypes.byref(used)) == 0 and used.value:
+            continue
+        out.append(name)
+    return out
+
+
+def current_options(prefixed: bool = True) -> dict[str, str]:
+    """Every option under the prefix now in the database (name without prefix ->
+    value); ``prefixed=False``: every option without it."""
+    PETSc = petsc()
+    return {k[len(PREFIX):] if prefixed else k: v for k, v in PETSc.Options().getAll().items()
+            if k.startswith(PREFIX) == prefixed}

@@ -80,6 +80,12 @@ class Comm:
         out[index] = values
         return out
 
+    def abort_with(self, line: str, code: int):
+        """Print ``line`` and abort the job: for an error found on some ranks only,
+        which the others cannot agree on (they may be waiting in a collective)."""
+        print(line, file=sys.stderr, flush=True)
+        self.abort(code)
+
     def abort(self, code: int = 1):
         sys.stderr.flush()
         sys.stdout.flush()

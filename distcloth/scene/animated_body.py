@@ -7,9 +7,9 @@ from ..body.bvh import read_bvh
 from ..body.clip import Timeline
 from ..body.regions import reachable_bones, region_triangles, submesh
 from ..body.retarget import MappingError
-from ..collision.colliders import RigidMotion, SkinnedMeshCollider, placement_map
+from ..collision.colliders import (MeshFrameError, RigidMotion, SkinnedMeshCollider,
+                                   collider_file_error, placement_map, read_mesh_frames)
 from ..config.schema import ConfigError
-from .meshio import read_mesh
 
 
 def load_animated_collider(spec, key: str, motion: RigidMotion | None = None) -> SkinnedMeshCollider:
@@ -32,7 +32,10 @@ def load_animated_collider(spec, key: str, motion: RigidMotion | None = None) ->
     except ValueError as exc:
         raise ConfigError(f"{key}.animation", f"clip {clip.duration:.4g} s",
                           f"a clip range and easing the clip has ({exc})") from None
-    vertices, triangles = read_mesh(spec.files[0])
+    try:
+        (vertices, triangles), = read_mesh_frames(spec.files)
+    except MeshFrameError as exc:
+        raise collider_file_error(spec, key, exc) from None
     try:
         body = AnimatedBody(vertices, triangles, clip, timeline, method=anim.skinning,
                             root_motion=anim.root_motion, mapping=dict(anim.joints))

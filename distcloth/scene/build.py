@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..collision.colliders import MeshFrameError, collider_file_error, read_mesh_frames
 from ..config.schema import ClothSpec, ConfigError, SceneConfig
 from ..model import FLEXION, SHEAR, STRUCTURAL, Model, PieceInfo
 from ..physics.bending import hinges
@@ -57,6 +58,7 @@ def build_model(cfg: SceneConfig) -> Model:
         raise ConfigError("cloth", [], "at least one cloth piece")
     bending_active = cfg.has("bending")
     _check_one_continuum_material(cfg)
+    _check_collider_files(cfg)
     # continuum pieces keep their springs (unused by the fem terms) without the
     # flexion correction, which belongs to the mass-spring model only
     garments = any(spec.mesh.pattern is not None for spec in cfg.cloth)
@@ -185,6 +187,17 @@ def _build_piece(p: int, spec: ClothSpec, bending_active: bool, cfg: SceneConfig
     piece.slide_index, piece.slide_axis = select_pin_axes(spec.pins, piece.positions,
                                                           piece.grid_resolution, f"{key}.pins")
     return piece
+
+
+def _check_collider_files(cfg: SceneConfig) -> None:
+    """Every mesh collider's files read and agree frame by frame, whether or not
+    the collisions effect is on, so that `check` finds a bad one before any work."""
+    for i, spec in enumerate(cfg.colliders):
+        if spec.shape == "mesh":
+            try:
+                read_mesh_frames(spec.files)
+            except MeshFrameError as exc:
+                raise collider_file_error(spec, f"colliders.{i}", exc) from None
 
 
 def _grid_piece(spec: ClothSpec, bending_active: bool, key: str) -> _Piece:

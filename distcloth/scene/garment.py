@@ -65,9 +65,9 @@ def body_meshes(cfg: SceneConfig) -> list:
     """The scene's mesh colliders at time 0 as ClosedMesh queries (the bodies
     a garment is dressed on)."""
     out = []
-    for spec in cfg.colliders:
+    for i, spec in enumerate(cfg.colliders):
         if spec.shape == "mesh":
-            mesh = load_collider_mesh(spec)
+            mesh = load_collider_mesh(spec, key=f"colliders.{i}")
             out.append(ClosedMesh(mesh.vertices(0.0), mesh.triangles))
     return out
 

@@ -291,6 +291,7 @@ def _ply_binary_uniform_lists(element, data, offset, order):
             if cursor + count_type.itemsize > len(data):
                 raise MeshFormatError(f"file ends inside element '{element.name}'")
             count = int(np.frombuffer(data, count_type, 1, cursor)[0])
+            _check_list_count(element, count, cursor + count_type.itemsize, prop, data)
             fields.append((f"c{i}", count_type))
             fields.append((f"p{i}", order + prop.dtype, (count,)))
             cursor += count_type.itemsize + count * np.dtype(prop.dtype).itemsize
@@ -314,6 +315,14 @@ def _ply_binary_uniform_lists(element, data, offset, order):
     return columns, offset + n * dtype.itemsize
 
 
+def _check_list_count(element, count: int, offset: int, prop, data: bytes) -> None:
+    """A binary list length read from the file: negative, or longer than what is
+    left of the file, is a broken file (numpy would take -1 as 'all the rest'
+    and a huge one as a huge allocation)."""
+    if count < 0 or offset + count * np.dtype(prop.dtype).itemsize > len(data):
+        raise MeshFormatError(f"element '{element.name}': bad list length {count}")
+
+
 def _ply_binary_rows(element, data, offset, order):
     """Lists of mixed lengths: each row's start depends on the previous row's
     length, so walk the rows one by one (only for mixed-polygon faces)."""
@@ -326,6 +335,7 @@ def _ply_binary_rows(element, data, offset, order):
                     count_type = np.dtype(order + prop.count_dtype)
                     count = int(np.frombuffer(data, count_type, 1, offset)[0])
                     offset += count_type.itemsize
+                    _check_list_count(element, count, offset, prop, data)
                     item_type = np.dtype(order + prop.dtype)
                     lists[prop.name][0].append(np.frombuffer(data, item_type, count, offset))
                     lists[prop.name][1].append(count)

@@ -145,13 +145,25 @@ def main(args, comm=None) -> int:
     if error is not None:
         say(f"error: {error}")
         return 2
+    base_dir = os.path.dirname(os.path.abspath(args.scene))
+    refused = sweep.refusals(variants, raw, base_dir, args.scene, comm, every=args.every)
+    # no comparison is possible without the reference or any variant: stop before
+    # the reference's long run rather than after it
+    roles = {v.role for v in variants if v.name not in refused}
+    if refused and ("reference" not in roles or "variant" not in roles):
+        for var in variants:
+            if var.name in refused:
+                say(f"{var.role} {var.label()}: refused: {refused[var.name]}")
+        say("error: " + ("the reference is refused" if "reference" not in roles
+                         else "every variant is refused") + ": nothing to compare")
+        return 2
     scene = os.path.splitext(os.path.basename(args.scene))[0]
     directory = args.dir or os.path.join("out", "accuracy", scene)
     n_var = sum(v.role == "variant" for v in variants)
     say(f"{n_var} variants + reference{'' if args.no_noise_floor else ' + noise floor'} "
         f"on {comm.size} rank(s) into {os.path.abspath(directory)}")
-    outcomes = sweep.run_sweep(variants, raw, os.path.dirname(os.path.abspath(args.scene)),
-                               args.scene, comm, directory, every=args.every, say=say)
+    outcomes = sweep.run_sweep(variants, raw, base_dir, args.scene, comm, directory,
+                               every=args.every, say=say)
     code = 0
     if comm.rank == 0:
         code = write_outputs(outcomes, {**axes, **alone}, directory, scene, args, comm.size, say,

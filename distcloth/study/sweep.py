@@ -283,6 +283,19 @@ def _config(raw, base_dir, source_name, overrides, every, comm):
     return comm.broadcast((cfg, message))
 
 
+def refusals(variants, raw: dict, base_dir: str, source_name: str, comm,
+             every: float | None = None) -> dict[str, str]:
+    """Each variant whose configuration is refused -> the error's one line,
+    found before anything runs; collective."""
+    raw = normalise_scene(raw)
+    out = {}
+    for var in variants:
+        _, message = _config(raw, base_dir, source_name, var.overrides, every, comm)
+        if message is not None:
+            out[var.name] = message
+    return out
+
+
 def perturb_start(sim, amplitude: float, seed: int = 20240601) -> None:
     """Move every start position by a fixed pseudo-random vector of this length:
     drawn for all vertices in input order on every rank, so ghosts agree."""
