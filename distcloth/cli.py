@@ -21,6 +21,7 @@ from .io.output_path import check_output_path
 from .linalg.petsc import command_line_options, init_petsc, take_options
 from .parallel.comm import Comm
 from .run import drape, run
+from .sew import sewing_path
 from .study import add_study_parsers, run_study
 
 
@@ -140,9 +141,13 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
             output = getattr(args, "output", None)
             if output is not None and not output.lower().endswith((".h5", ".hdf5")):
                 raise ConfigError("--output", output, "a file name ending in .h5 or .hdf5")
-            # replacing an existing result: --overwrite (a resumed run appends to it)
-            check_output_path(output or cfg.output.file, "--output" if output else "output.file",
-                              replace=args.overwrite)
+            path = output or cfg.output.file
+            # a garment being sewn also writes its sewing phase beside the result
+            sewn = any(spec.mesh.pattern is not None for spec in cfg.cloth)
+            for p in [path, sewing_path(path)] if sewn else [path]:
+                # replacing an existing result: --overwrite (a resumed run appends to it)
+                check_output_path(p, "--output" if output else "output.file",
+                                  replace=args.overwrite)
         except ConfigError as exc:
             message = format_config_error(exc)
     cfg, message = comm.broadcast((cfg, message))

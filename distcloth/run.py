@@ -45,9 +45,13 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
         model = build_model(cfg)
     except ConfigError as exc:
         err = exc
+    except MemoryError:      # past the up-front estimate (scene/build.py): still one line
+        err = ConfigError("cloth", "the scene", "a scene whose model fits in memory")
     code = _agree_config(comm, err)
     if code:
         return None, code
+    for note in getattr(model, "load_notes", ()):
+        log(comm, note)
     sim = None
     try:
         sim = Simulation(cfg, model, comm, force_explicit=force,
@@ -111,9 +115,16 @@ def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
         # the step's row first, so the frame's flush carries it; the output
         # stage's time is charged to the following step's row
         times, calls = sim.pipeline.take_step_counters()
-        writer.write_step(sim.state.step, sim.state.t, diag, times, calls)
-        if k % every == 0 or k == n_steps:
-            sim.pipeline.run("output", writer)
+        failure = None
+        try:
+            writer.write_step(sim.state.step, sim.state.t, diag, times, calls)
+            if k % every == 0 or k == n_steps:
+                sim.pipeline.run("output", writer)
+        except OSError as exc:      # a full disk, a lost file system: on some ranks only, maybe
+            failure = f"writing {os.path.abspath(writer.path)} failed: {exc}"
+        agreed = sim.comm.agree(failure)
+        if agreed is not None:
+            raise SimulationError(sim.state.step, agreed[1])
         if bar:
             bar.update(k, sim.state.t)
 

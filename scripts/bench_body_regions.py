@@ -30,7 +30,7 @@ STAGES = ("collision:bodies", "collision:response")
 
 def run(out: Path, ranks: int, end: float, reach) -> tuple[float, str]:
     cmd = [str(ROOT / "scripts" / "mpiexec.sh"), str(ranks), sys.executable, "-m", "distcloth",
-           "run", str(SCENE), "--output", str(out), "--set", f"time.end={end}",
+           "run", str(SCENE), "--output", str(out), "--overwrite", "--set", f"time.end={end}",
            "--set", f"colliders.0.animation.reach={'null' if reach is None else reach}"]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
     t0 = time.perf_counter()

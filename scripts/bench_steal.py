@@ -32,7 +32,7 @@ the mean steal latency.  A second table sweeps a, b and chunk on the
 synthetic crowded scene.
 
     scripts/mpiexec.sh 2 .venv/bin/python -m distcloth run configs/ribbon.yaml \\
-        --set time.end=3.0 --set output.preview=false --output /tmp/r.h5        # ~4 min
+        --set time.end=3.0 --set output.preview=false --output /tmp/r.h5 --overwrite        # ~4 min
     .venv/bin/python scripts/bench_steal.py --ribbon /tmp/r.h5                  # ~2 min
     .venv/bin/python scripts/bench_steal.py --quick                             # no sweep
 

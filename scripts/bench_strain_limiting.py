@@ -51,7 +51,7 @@ def run(ranks, method, args, out):
             f"strain_limiting.method={method}", f"strain_limiting.weft={args.bound}",
             f"strain_limiting.warp={args.bound}"]
     cmd = [str(ROOT / "scripts" / "mpiexec.sh"), str(ranks), sys.executable, "-m", "distcloth",
-           "run", str(SCENE), "--quiet", "--output", str(out)]
+           "run", str(SCENE), "--quiet", "--output", str(out), "--overwrite"]
     for s in sets:
         cmd += ["--set", s]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}

@@ -59,7 +59,7 @@ def run_scenes(tree: Path, scenes: list[str], ranks: int, sets: list[str], out: 
             continue
         partial = out / f"{scene}.partial.h5"
         cmd = [str(ROOT / "scripts/mpiexec.sh"), str(ranks), PYTHON, "-m", "distcloth", "run",
-               str(tree / "configs" / f"{scene}.yaml"), "--output", str(partial), "--quiet",
+               str(tree / "configs" / f"{scene}.yaml"), "--output", str(partial), "--overwrite", "--quiet",
                "--set", "output.preview=false"]
         for s in sets:
             cmd += ["--set", s]

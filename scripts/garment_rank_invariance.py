@@ -35,7 +35,7 @@ from distcloth.io.h5read import read_result  # noqa: E402
 
 def run(scene: str, ranks: int, out: Path, sets: list[str]) -> float:
     cmd = [str(ROOT / "scripts" / "mpiexec.sh"), str(ranks), str(ROOT / ".venv" / "bin" / "python"),
-           "-m", "distcloth", "run", scene, "--output", str(out), "--quiet",
+           "-m", "distcloth", "run", scene, "--output", str(out), "--overwrite", "--quiet",
            "--set", "output.preview=false"]
     for s in sets:
         cmd += ["--set", s]

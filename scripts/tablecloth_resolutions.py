@@ -61,7 +61,7 @@ def run_one(n: int, out: Path, end: float, ranks: int, extra: list[str]) -> dict
     cmd = [str(ROOT / "scripts" / "mpiexec.sh"), str(ranks), str(ROOT / ".venv" / "bin" / "distcloth"),
            "run", str(SCENE), "--set", f"cloth.0.mesh.grid.resolution=[{n},{n}]",
            "--set", f"time.end={end}", "--set", "output.preview=false",
-           "--output", str(path), "--quiet", *extra]
+           "--output", str(path), "--overwrite", "--quiet", *extra]
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     wall = time.perf_counter() - t0

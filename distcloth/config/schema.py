@@ -104,6 +104,11 @@ class MeshSpec:
                                   "path is relative to the scene file", read="pattern_file",
                                   one_of="shape")
     scale: float = setting(1.0, doc="scale factor of a file mesh", above=0, only=FILE_ONLY)
+    weld: bool = setting(True, doc="file: weld vertices that coincide (an exporter splits "
+                         "them along UV seams, and the cloth would tear there); pin indices "
+                         "stay the file's", only=FILE_ONLY)
+    weld_tolerance: float = setting(1.0e-6, doc="file: vertices closer than this are one "
+                                    "(after scale)", unit="m", above=0, only=FILE_ONLY)
     edge_length: float = setting(0.02, doc="pattern: target edge length of the panel meshes",
                                  unit="m", above=0, only=PATTERN_ONLY)
     up_axis: str = choice("y", UP_AXES, doc="pattern: the pattern's up axis; y (GarmentCode's): "

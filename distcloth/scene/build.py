@@ -15,6 +15,7 @@ from . import grid as gridlib
 from .meshio import MeshFormatError, read_mesh
 from .pins import select_pin_axes, select_pins
 from .placement import place
+from .weld_vertices import count_parts, weld_coincident
 from .garment import (Garment, body_meshes, check_garment_start, garment_arrays,
                       pattern_piece_of)
 from .springs import (check_triangle_mesh, flexion_stiffness, grid_spring_constants,
@@ -37,6 +38,8 @@ class _Piece:
     slide_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     slide_axis: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     garment: Garment | None = None    # pattern pieces: grain, stitches, fused regions
+    file_index: np.ndarray | None = None   # welded file meshes: new index of each file vertex
+    notes: list[str] = field(default_factory=list)   # what loading it changed or found
 
 
 def build_model(cfg: SceneConfig) -> Model:
@@ -124,6 +127,7 @@ def build_model(cfg: SceneConfig) -> Model:
                  spring_kind=kind.astype(np.int8), pinned=pinned.astype(np.int64),
                  slide_vertices=slide_index.astype(np.int64), slide_axes=slide_axis,
                  pieces=infos, initial_positions=_start_noise(cfg, infos, positions, triangles))
+    model.load_notes = [note for piece in pieces for note in piece.notes]
     if any(piece.garment is not None for piece in pieces):
         garment_arrays(model, cfg, [piece.garment for piece in pieces], offsets)
         if cfg.garment.start_check:
@@ -183,10 +187,41 @@ def _build_piece(p: int, spec: ClothSpec, bending_active: bool, cfg: SceneConfig
         piece.garment = garment
     else:
         raise ConfigError(f"{key}.mesh", None, "exactly one of grid, file")
-    piece.pinned = select_pins(spec.pins, piece.positions, piece.grid_resolution, f"{key}.pins")
-    piece.slide_index, piece.slide_axis = select_pin_axes(spec.pins, piece.positions,
+    pins = spec.pins
+    if piece.file_index is not None:     # pin indices are the file's, before the weld
+        pins = tuple(_welded_pin(pin, piece.file_index, f"{key}.pins.{i}")
+                     for i, pin in enumerate(pins))
+    piece.pinned = select_pins(pins, piece.positions, piece.grid_resolution, f"{key}.pins")
+    piece.slide_index, piece.slide_axis = select_pin_axes(pins, piece.positions,
                                                           piece.grid_resolution, f"{key}.pins")
     return piece
+
+
+# the least every rank holds per vertex of the whole model (positions, masses,
+# springs, the pattern and the matrix rows of its own share come on top)
+MODEL_BYTES_PER_VERTEX = 400
+
+
+def _check_fits_in_memory(n_vertices: int, key: str, value) -> None:
+    """Refuse a mesh whose model alone cannot fit in this machine's available
+    memory, before anything is allocated (every rank holds the whole model)."""
+    available = available_memory()
+    need = n_vertices * MODEL_BYTES_PER_VERTEX
+    if available is not None and need > available:
+        raise ConfigError(key, value, f"a mesh that fits in memory: {n_vertices} vertices need "
+                          f"at least {need / 2**30:.3g} GiB, {available / 2**30:.3g} GiB available")
+
+
+def available_memory() -> int | None:
+    """MemAvailable of /proc/meminfo in bytes (None where there is none)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 
 def _check_collider_files(cfg: SceneConfig) -> None:
@@ -200,12 +235,25 @@ def _check_collider_files(cfg: SceneConfig) -> None:
                 raise collider_file_error(spec, f"colliders.{i}", exc) from None
 
 
+def _welded_pin(pin, file_index: np.ndarray, key: str):
+    """``pin`` with its file vertex indices moved to the welded mesh's."""
+    if pin.indices is None:
+        return pin
+    indices = np.asarray(pin.indices, dtype=np.int64)
+    if ((indices < 0) | (indices >= file_index.shape[0])).any():
+        raise ConfigError(f"{key}.indices", list(pin.indices),
+                          f"vertex indices of the file, 0 <= i < {file_index.shape[0]}")
+    return dataclasses.replace(pin, indices=tuple(int(i) for i in file_index[indices]))
+
+
 def _grid_piece(spec: ClothSpec, bending_active: bool, key: str) -> _Piece:
     grid = spec.mesh.grid
     if grid.pattern not in gridlib.GRID_PATTERNS:
         raise ConfigError(f"{key}.mesh.grid.pattern", grid.pattern,
                           "one of " + " | ".join(gridlib.GRID_PATTERNS))
     resolution = (int(grid.resolution[0]), int(grid.resolution[1]))
+    _check_fits_in_memory(resolution[0] * resolution[1], f"{key}.mesh.grid.resolution",
+                          list(resolution))
     dx, dy = gridlib.grid_spacing(grid.size, resolution)
     positions = place(gridlib.grid_vertices(grid.size, resolution),
                       spec.mesh.rotation, spec.mesh.center)
@@ -242,9 +290,17 @@ def _file_piece(spec: ClothSpec, key: str) -> _Piece:
     repeated or non-manifold triangles are refused, not repaired, so that
     vertex indices in pins mean what they mean in the file."""
     mesh = spec.mesh
+    file_index, notes = None, []
     try:
         vertices, triangles = read_mesh(mesh.file)
         vertices = vertices * mesh.scale
+        if mesh.weld:
+            n_file = vertices.shape[0]
+            vertices, triangles, file_index, merged = weld_coincident(vertices, triangles,
+                                                                      mesh.weld_tolerance)
+            if merged:
+                notes.append(f"{key}: welded {merged} of {n_file} vertices that coincide "
+                             f"(within mesh.weld_tolerance {mesh.weld_tolerance:g} m)")
         check_triangle_mesh(vertices, triangles)
         topology = mesh_springs(vertices, triangles)     # refuses what springs cannot carry
     except OSError as exc:
@@ -253,8 +309,14 @@ def _file_piece(spec: ClothSpec, key: str) -> _Piece:
     except MeshFormatError as exc:
         raise ConfigError(f"{key}.mesh.file", mesh.file,
                           f"an OBJ or PLY triangle mesh cloth can use: {exc}") from None
-    return _triangle_piece(spec, place(vertices, mesh.rotation, mesh.center), triangles,
-                           vertices, topology)
+    parts = count_parts(vertices.shape[0], triangles)
+    if parts > 1:
+        notes.append(f"warning: {key} is {parts} separate parts (no shared vertices between "
+                     "them): they move apart" + ("; mesh.weld is off" if not mesh.weld else ""))
+    piece = _triangle_piece(spec, place(vertices, mesh.rotation, mesh.center), triangles,
+                            vertices, topology)
+    piece.file_index, piece.notes = file_index, notes
+    return piece
 
 
 def _triangle_piece(spec: ClothSpec, positions, triangles, vertices=None,
