@@ -199,7 +199,7 @@ def test_rank_invariance_continuum_membrane(tmp_path, bending):
 def test_explicit_limit_covers_continuum_membrane(tmp_path):
     # the Gershgorin bound comes from the assembled stiffness of every term, so an
     # FE membrane is checked too (it once escaped a spring-only bound)
-    p = run_cli(["check", SQUARE, "--set", "time.integrator=rk4",
+    p = run_cli(["check", SQUARE, "--output", tmp_path / "c.h5", "--set", "time.integrator=rk4",
                  "--set", "cloth.0.material={model: fem, density: 0.1, E_weft: 10.0}"], ranks=2)
     assert p.returncode == 2 and "rk4 is unstable above" in p.stderr, p.stderr
 
@@ -207,11 +207,13 @@ def test_explicit_limit_covers_continuum_membrane(tmp_path):
 def test_own_solver_settings_on_the_command_line(tmp_path):
     """-distcloth_mat_type and the other linear_system: keys are scene settings,
     checked like --set and never left to PETSc (which would call them unused)."""
-    p = run_cli(["check", SQUARE, "-distcloth_mat_type", "dense"], ranks=2, timeout=120)
+    p = run_cli(["check", SQUARE, "--output", tmp_path / "c.h5", "-distcloth_mat_type", "dense"],
+                ranks=2, timeout=120)
     lines = [ln for ln in p.stderr.splitlines() if ln.startswith("distcloth: config error")]
     assert p.returncode == 2 and lines == [
         "distcloth: config error: command line -distcloth_mat_type: 'dense' — one of baij | aij"]
-    p = run_cli(["check", SQUARE, "-distcloth_mat_type", "aij", "-distcloth_warm_start", "true",
+    p = run_cli(["check", SQUARE, "--output", tmp_path / "c.h5", "-distcloth_mat_type", "aij",
+                 "-distcloth_warm_start", "true",
                  "-distcloth_pc_rebuild_every", "3"], ranks=2, timeout=120)
     assert p.returncode == 0, p.stderr
     assert "aij matrix, " in p.stderr and "warm start" in p.stderr and "every 3 solves" in p.stderr
