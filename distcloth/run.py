@@ -115,18 +115,26 @@ def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
         # the step's row first, so the frame's flush carries it; the output
         # stage's time is charged to the following step's row
         times, calls = sim.pipeline.take_step_counters()
-        failure = None
-        try:
-            writer.write_step(sim.state.step, sim.state.t, diag, times, calls)
-            if k % every == 0 or k == n_steps:
-                sim.pipeline.run("output", writer)
-        except OSError as exc:      # a full disk, a lost file system: on some ranks only, maybe
-            failure = f"writing {os.path.abspath(writer.path)} failed: {exc}"
-        agreed = sim.comm.agree(failure)
-        if agreed is not None:
-            raise SimulationError(sim.state.step, agreed[1])
+        _agreed_write(sim, writer, writer.write_step, sim.state.step, sim.state.t, diag, times,
+                      calls)
+        if k % every == 0 or k == n_steps:
+            _agreed_write(sim, writer, sim.pipeline.run, "output", writer)
         if bar:
             bar.update(k, sim.state.t)
+
+
+def _agreed_write(sim, writer, write, *args) -> None:
+    """``write(*args)`` on every rank, then agreed before anyone goes on to the next
+    collective: a write that fails (a full disk, a lost file system), maybe on
+    some ranks only, stops every rank as a failed step (SimulationError)."""
+    failure = None
+    try:
+        write(*args)
+    except OSError as exc:
+        failure = f"writing {writer.path} failed: {exc}"
+    agreed = sim.comm.agree(failure)
+    if agreed is not None:
+        raise SimulationError(sim.state.step, agreed[1])
 
 
 def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only=False,

@@ -3,7 +3,9 @@ argument, exit status 2, no traceback and no output file, under ``check`` and
 under ``run`` alike, launched as a user does (scripts/mpiexec.sh 2).
 
 The cases are run as two child jobs per case (check, run) on a tiny scene
-(100 vertices, one step); rank 0 of the test job launches them."""
+(100 vertices, one step); rank 0 of the test job launches them.  A write
+that fails during the run (a disk filling up) is tested in process on every
+rank of the test job."""
 from __future__ import annotations
 
 import struct
@@ -14,8 +16,6 @@ import pytest
 import yaml
 
 from conftest import ROOT, clean_env
-
-pytestmark = pytest.mark.rank0_only
 
 TINY = {
     "scene": "tiny",
@@ -125,6 +125,7 @@ def outputs(tmp_path):
                   and p.is_file() and p.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n")
 
 
+@pytest.mark.rank0_only
 @pytest.mark.parametrize("case", list(CASES))
 def test_bad_input_is_one_line_and_exit_2(tmp_path, case):
     files, changes, extra, key = CASES[case]
@@ -139,6 +140,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, case):
         assert outputs(tmp_path) == [], (command, outputs(tmp_path))
 
 
+@pytest.mark.rank0_only
 def test_overwrite_replaces_an_existing_result(tmp_path):
     prepare(tmp_path, {}, {}, [])
     assert launch(["run", "scene.yaml", "--quiet"], tmp_path).returncode == 0
@@ -151,6 +153,7 @@ def test_overwrite_replaces_an_existing_result(tmp_path):
     assert (tmp_path / "out" / "tiny.h5").stat().st_mtime_ns != first
 
 
+@pytest.mark.rank0_only
 def test_options_writing_files_are_taken_from_the_command_line(tmp_path):
     # refused from a scene (above), a viewer to a file is the user's own choice here
     prepare(tmp_path, {}, {}, [])
@@ -158,6 +161,7 @@ def test_options_writing_files_are_taken_from_the_command_line(tmp_path):
     assert p.returncode == 0, p.stderr[-3000:]
 
 
+@pytest.mark.rank0_only
 def test_study_refuses_every_variant_before_the_reference(tmp_path):
     prepare(tmp_path, {}, {}, [])
     p = launch(["study", "accuracy", "scene.yaml", "--vary", "time.step=0.003,0.007",
@@ -183,3 +187,34 @@ def test_coincident_vertices_are_welded_and_parts_reported(tmp_path):
     apart = build_model(load_config(str(tmp_path / "scene.yaml"), ["cloth.0.mesh.weld=false"]))
     assert apart.rest_positions.shape[0] == 6
     assert any("2 separate parts" in note for note in apart.load_notes)
+
+
+def test_a_write_failing_on_one_rank_fails_the_run_on_all(shared_tmp, comm, monkeypatch):
+    # a full disk seen by the last rank only at step 2: every rank stops there,
+    # the file says failed with the cause, exit status 1, no rank left waiting
+    import errno
+
+    import h5py
+
+    from distcloth.config.load import config_from_dict
+    from distcloth.io.h5writer import ResultWriter
+    from distcloth.linalg.petsc import init_petsc
+    from distcloth.parallel.comm import Comm
+    from distcloth.run import run
+    init_petsc([])
+    write_step = ResultWriter.write_step
+
+    def full_disk(self, step, *args, **kwargs):
+        if step == 2 and comm.Get_rank() == comm.Get_size() - 1:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return write_step(self, step, *args, **kwargs)
+
+    monkeypatch.setattr(ResultWriter, "write_step", full_disk)
+    raw = {**TINY, "time": {"end": 0.05, "step": 0.01},
+           "output": {"file": str(shared_tmp / "full.h5"), "every": 0.01, "preview": False}}
+    cfg = config_from_dict(raw, str(shared_tmp), "full.yaml")
+    assert run(cfg, Comm(comm), quiet=True, progress=False) == 1
+    comm.barrier()
+    with h5py.File(shared_tmp / "full.h5", "r") as f:
+        assert f.attrs["status"] == "failed" and int(f.attrs["error_step"]) == 2
+        assert "No space left on device" in f.attrs["error"]

@@ -429,7 +429,9 @@ class ResultWriter:
 
     def _flush_steps(self) -> None:
         """Append the buffered steps to every per-step table (collective)."""
-        m = self._n_buffered
+        # rank 0's count (it writes the rows): after a write that failed on some
+        # ranks only, the others may hold one step more, and the resize must agree
+        m = int(self._comm.broadcast(self._n_buffered, root=0))
         if m == 0:
             return
         for ds, buf in self._step_tables:
