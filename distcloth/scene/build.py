@@ -16,6 +16,7 @@ from .pins import select_pin_axes, select_pins
 from .placement import place
 from .garment import (Garment, body_meshes, check_garment_start, garment_arrays,
                       pattern_piece_of)
+from .uvs import scene_uvs
 from .springs import (check_triangle_mesh, flexion_stiffness, grid_spring_constants,
                       mesh_springs, mesh_structural_stiffness, triangle_areas)
 
@@ -122,6 +123,9 @@ def build_model(cfg: SceneConfig) -> Model:
                  spring_kind=kind.astype(np.int8), pinned=pinned.astype(np.int64),
                  slide_vertices=slide_index.astype(np.int64), slide_axes=slide_axis,
                  pieces=infos, initial_positions=_start_noise(cfg, infos, positions, triangles))
+    uvs = scene_uvs(cfg, infos)
+    if uvs is not None:
+        model.uv, model.uv_index = uvs
     if any(piece.garment is not None for piece in pieces):
         garment_arrays(model, cfg, [piece.garment for piece in pieces], offsets)
         if cfg.garment.start_check:
