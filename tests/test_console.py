@@ -3,7 +3,12 @@ sparse plain lines otherwise, and an ETA the first slow step does not spoil."""
 from __future__ import annotations
 
 import io
+import subprocess
 import sys
+
+import pytest
+
+from conftest import ROOT, clean_env
 
 from distcloth.io.console import Progress, log
 
@@ -74,3 +79,18 @@ def test_other_ranks_and_disabled_print_nothing():
         for k in range(1, 11):
             bar.update(k, 0.0)
         assert bar.stream.getvalue() == ""
+
+
+@pytest.mark.rank0_only
+def test_launcher_keeps_a_config_error_one_line():
+    """scripts/mpiexec.sh passes --quiet to Open MPI: no banner after the
+    error line of a rank that exits with status 2, unless asked for."""
+    cmd = [str(ROOT / "scripts" / "mpiexec.sh"), "2", sys.executable, "-m", "distcloth", "check",
+           str(ROOT / "configs" / "default.yaml"), "--set", "time.end=x"]
+    quiet = subprocess.run(cmd, env=clean_env(), capture_output=True, text=True, timeout=300)
+    assert quiet.returncode == 2
+    assert quiet.stderr.strip().splitlines() == [
+        "distcloth: config error: time.end: 'x' — a finite number > 0"], quiet.stderr
+    loud = subprocess.run(cmd, env=clean_env(DISTCLOTH_MPI_VERBOSE="1"), capture_output=True,
+                          text=True, timeout=300)
+    assert loud.returncode == 2 and "non-zero" in loud.stderr
