@@ -26,7 +26,8 @@ fi
 
 # numba compiles a kernel on its first call and caches it beside its source
 # (cache=True): a tiny run of two scenes here (the README's hammock, and a
-# tablecloth touching a sphere for the collision kernels) so that a first real
+# tablecloth touching a sphere, with self-collisions, for the collision
+# kernels) so that a first real
 # run does not pay 1-2 minutes of compilation.  Redone when a file that uses
 # numba changes; a failed warm-up only means the first run compiles.
 warm="$venv/.numba-warm"
@@ -39,7 +40,9 @@ if [ ! -e "$warm" ] || [ -n "$(find "$here/distcloth" -name '*.py' -newer "$warm
     --set time.end=0.03 --set output.preview=false >/dev/null 2>"$tmp/log" || ok=0
   "$venv/bin/distcloth" run "$here/configs/tablecloth_sphere.yaml" --quiet --output "$tmp/b.h5" \
     --set time.end=0.03 --set output.preview=false --set "cloth.0.mesh.center=[0,0,0.502]" \
-    --set "cloth.0.mesh.grid.resolution=[9,9]" >/dev/null 2>>"$tmp/log" || ok=0
+    --set "cloth.0.mesh.grid.resolution=[9,9]" \
+    --set "effects=[gravity,membrane,bending,damping,collisions,self_collision]" \
+    >/dev/null 2>>"$tmp/log" || ok=0
   if [ $ok = 1 ]; then touch "$warm"; else
     echo "setup: the warm-up run failed (a first run will compile the kernels):" >&2
     tail -n 5 "$tmp/log" >&2

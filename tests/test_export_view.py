@@ -147,7 +147,7 @@ def test_pc2_round_trip_and_rest_mesh(tmp_path):
     assert head[:12] == b"POINTCACHE2\0"
     pc2 = read_pc2(cache)
     assert pc2["positions"].dtype == np.float32 and pc2["positions"].shape == (3, 30, 3)
-    assert (pc2["start"], pc2["sample_rate"]) == (1.0, 1.0)
+    assert (pc2["start"], pc2["sample_rate"]) == (0.0, 1.0)
     np.testing.assert_array_equal(pc2["positions"], frames[[0, 2, 4]].astype(np.float32))
     # the rest mesh the modifier goes on: the same vertices, in the same order
     with h5py.File(path, "r") as f:

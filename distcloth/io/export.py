@@ -30,8 +30,9 @@ from .frames import ResultFrames, parse_frames
 FORMATS = ("obj", "ply", "pc2")
 PC2_MAGIC = b"POINTCACHE2\0"
 PC2_HEADER = struct.Struct("<12siiffi")
-# the first frame of a Blender scene: the cache's first sample plays there
-PC2_START_FRAME = 1.0
+# Blender's Mesh Cache modifier (Frame mode) shows sample F - its Frame Start
+# at scene frame F and ignores the header's start: 0 says the same thing
+PC2_START_FRAME = 0.0
 
 
 def obj_text(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray | None = None,
