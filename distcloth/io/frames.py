@@ -63,8 +63,7 @@ class ResultFrames:
         try:
             self._file = h5py.File(self.path, "r")
         except (OSError, ValueError) as exc:
-            raise ConfigError("RESULT", self.path, f"a readable distcloth result file "
-                                                   f"({_reason(exc)})") from None
+            raise ConfigError("RESULT", self.path, f"a readable HDF5 result file ({exc})") from None
         f = self._file
         if f.attrs.get("format") not in ("distcloth-result", b"distcloth-result") \
                 or "frames/positions" not in f or "mesh/triangles" not in f:
@@ -104,7 +103,3 @@ class ResultFrames:
     def __exit__(self, *exc) -> None:
         self.close()
 
-
-def _reason(exc: Exception) -> str:
-    text = str(exc).split("(")[0].strip().rstrip(",")
-    return text or type(exc).__name__
