@@ -1,5 +1,6 @@
-"""Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``
-and ``distcloth study NAME [options]`` (distcloth/study/).
+"""Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``,
+``distcloth study NAME [options]`` (distcloth/study/) and the serial tools on
+a result file, ``distcloth export|view RESULT.h5 [options]`` (io/commands.py).
 
 Arguments with a single leading dash (``-distcloth_ksp_rtol 1e-8``,
 ``-log_view``) are PETSc options and go to PETSc untouched; the command
@@ -18,6 +19,7 @@ import traceback
 from .config import ConfigError, format_config_error, load_config
 from .config.load import command_line_key, own_option_names
 from .io.output_path import check_output_path
+from .io.commands import COMMANDS as RESULT_COMMANDS, add_result_parsers, run_result_command
 from .linalg.petsc import command_line_options, init_petsc, take_options
 from .parallel.comm import Comm
 from .run import drape, run
@@ -92,6 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_study_parsers(sub.add_parser("study", help="studies of the simulator (accuracy "
                                                    "against time, stability suite)",
                                      allow_abbrev=False))
+    add_result_parsers(sub)
     return p
 
 
@@ -99,6 +102,13 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ours, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(ours)
+    if args.command in RESULT_COMMANDS:     # serial tools on a result file: no PETSc
+        if petsc_args:
+            print(format_config_error(ConfigError(petsc_args[0], " ".join(petsc_args),
+                                                  f"no PETSc options for distcloth "
+                                                  f"{args.command}")), file=sys.stderr)
+            return 2
+        return run_result_command(args)
 
     message = _unreadable_options_file(petsc_args)
     if message is not None:       # PETSc reads it on rank 0 only: the others would wait for it

@@ -62,6 +62,9 @@ class Model:
     seam_lines: np.ndarray | None = None          # (m, 2) welded seam edges (extra springs)
     seam_rest_length: np.ndarray | None = None    # (m,) their rest lengths (shrinkage included)
     seam_stiffness: np.ndarray | None = None      # (m,) N/m
+    # texture coordinates of mesh files that have them (scene/uvs.py), per triangle corner
+    uv: np.ndarray | None = None                  # (k, 2)
+    uv_index: np.ndarray | None = None            # (nt, 3) rows of uv, -1: none
     pattern_vertex: np.ndarray | None = None      # (n_pattern,) simulated vertex of each
     #   pattern vertex (identity before welding)
 

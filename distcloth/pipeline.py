@@ -4,14 +4,16 @@ The stages and their order come from ``distcloth/stages.py``; a simulation
 binds a function to each stage its scene has.  A stage that is off is never
 called: ``run`` returns None without touching its function, so what a scene
 does not ask for costs nothing.  The counters prove it (tests read them from
-the output file).
+the output file).  Each enabled stage is also a PETSc log event
+(linalg/log_events.py), so ``-log_view`` lists it.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
+from .linalg.log_events import stage_event
 from .stages import STAGES
 
 
@@ -24,6 +26,7 @@ class Stage:
     seconds: float = 0.0
     step_calls: int = 0
     step_seconds: float = 0.0
+    event: Any = None          # its PETSc log event (-log_view)
 
 
 @dataclass
@@ -42,7 +45,8 @@ class Pipeline:
         for name in STAGES:
             if name in bindings:
                 fn, enabled = bindings[name]
-                p.stages[name] = Stage(name, fn, bool(enabled) and fn is not None)
+                on = bool(enabled) and fn is not None
+                p.stages[name] = Stage(name, fn, on, event=stage_event(name))
         return p
 
     def enabled(self, name: str) -> bool:
@@ -56,9 +60,11 @@ class Pipeline:
         if self.trace is not None:
             self.trace.append(name)
         t0 = time.perf_counter()
+        st.event.begin()
         try:
             return st.fn(*args, **kwargs)
         finally:
+            st.event.end()
             dt = time.perf_counter() - t0
             st.calls += 1
             st.seconds += dt

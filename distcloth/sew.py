@@ -127,8 +127,11 @@ def weld(sim: Simulation, cfg, comm, *, quiet=False, force=False,
 
 
 def garment_arrays(model) -> dict:
-    """The main result file's /garment datasets."""
+    """The main result file's static datasets from the model: the garment's
+    /garment maps and the mesh's UVs (/mesh/uv, /mesh/uv_index)."""
+    uvs = ({} if model.uv is None else
+           {"mesh/uv": model.uv.astype(np.float64), "mesh/uv_index": model.uv_index.astype(np.int64)})
     if model.pattern_vertex is None or model.seam_lines is None:
-        return {}
-    return {"garment/pattern_vertex": model.pattern_vertex.astype(np.int64),
+        return uvs
+    return {**uvs, "garment/pattern_vertex": model.pattern_vertex.astype(np.int64),
             "garment/seam_lines": model.seam_lines.astype(np.int64)}

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Idempotent setup: Debian packages + the distcloth package in a venv with system site packages.
+# Idempotent setup: Debian packages + the distcloth package in a venv with system site
+# packages, then numba's kernels compiled once.  libjs-three is the 3D library
+# `distcloth view` copies into its pages; chromium runs the viewer's test.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
-PKGS="openssh-client openmpi-bin libopenmpi-dev libmetis-dev libmetis5 petsc-dev python3-petsc4py python3-mpi4py python3-h5py-mpi python3-numpy python3-scipy python3-yaml python3-numba python3-pytest python3-matplotlib python3-gmsh python3-venv python3-pip python3-setuptools"
+PKGS="openssh-client openmpi-bin libopenmpi-dev libmetis-dev libmetis5 petsc-dev python3-petsc4py python3-mpi4py python3-h5py-mpi python3-numpy python3-scipy python3-yaml python3-numba python3-pytest python3-matplotlib python3-gmsh libjs-three chromium python3-venv python3-pip python3-setuptools"
 missing=""
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
@@ -20,4 +22,30 @@ fi
 if ! "$venv/bin/python" -c "import distcloth" 2>/dev/null || [ "$here/pyproject.toml" -nt "$venv/.installed" ]; then
   "$venv/bin/python" -m pip install -q --no-build-isolation --no-deps -e "$here" >/dev/null
   touch "$venv/.installed"
+fi
+
+# numba compiles a kernel on its first call and caches it beside its source
+# (cache=True): a tiny run of two scenes here (the README's hammock, and a
+# tablecloth touching a sphere, with self-collisions, for the collision
+# kernels) so that a first real
+# run does not pay 1-2 minutes of compilation.  Redone when a file that uses
+# numba changes; a failed warm-up only means the first run compiles.
+warm="$venv/.numba-warm"
+if [ ! -e "$warm" ] || [ -n "$(find "$here/distcloth" -name '*.py' -newer "$warm" -print0 \
+                                | xargs -0 -r grep -l numba)" ]; then
+  echo "setup: compiling the numba kernels (once, about a minute)" >&2
+  tmp=$(mktemp -d)
+  ok=1
+  "$venv/bin/distcloth" run "$here/configs/default.yaml" --quiet --output "$tmp/a.h5" \
+    --set time.end=0.03 --set output.preview=false >/dev/null 2>"$tmp/log" || ok=0
+  "$venv/bin/distcloth" run "$here/configs/tablecloth_sphere.yaml" --quiet --output "$tmp/b.h5" \
+    --set time.end=0.03 --set output.preview=false --set "cloth.0.mesh.center=[0,0,0.502]" \
+    --set "cloth.0.mesh.grid.resolution=[9,9]" \
+    --set "effects=[gravity,membrane,bending,damping,collisions,self_collision]" \
+    >/dev/null 2>>"$tmp/log" || ok=0
+  if [ $ok = 1 ]; then touch "$warm"; else
+    echo "setup: the warm-up run failed (a first run will compile the kernels):" >&2
+    tail -n 5 "$tmp/log" >&2
+  fi
+  rm -rf "$tmp"
 fi

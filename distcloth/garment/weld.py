@@ -195,6 +195,7 @@ def weld_model(model: Model, x: np.ndarray, v: np.ndarray, material: SeamMateria
         slide_vertices=slide_v, slide_axes=slide_a,
         triangle_weft=None if model.triangle_weft is None else model.triangle_weft[keep],
         triangle_scale=None if model.triangle_scale is None else model.triangle_scale[keep],
+        uv_index=None if model.uv_index is None else model.uv_index[keep],
         rest_triangles=rest_tri, stitch_pairs=None, stitch_gap=None, stitch_index=None,
         same_vertex=None, seam_lines=lines, seam_rest_length=line_rest, seam_stiffness=line_k,
         pattern_vertex=pattern_vertex)

@@ -4,6 +4,8 @@ Layout (every array in *input* vertex order, whatever the partition)::
 
     /mesh/triangles            (nt, 3) int64
     /mesh/rest_positions       (n, 3) float64
+    /mesh/uv, /mesh/uv_index   (k, 2) float64, (nt, 3) int64: per-corner texture
+                               coordinates of a cloth mesh file that had them
     /partition/part            (n,) int32      owning rank of each input vertex
     /config                    scalar UTF-8 string: the resolved configuration
     /frames/positions          (frames, n, 3) float64, chunks (1, min(n, 65536), 3)

@@ -18,6 +18,7 @@ from .placement import place
 from .weld_vertices import count_parts, weld_coincident
 from .garment import (Garment, body_meshes, check_garment_start, garment_arrays,
                       pattern_piece_of)
+from .uvs import scene_uvs
 from .springs import (check_triangle_mesh, flexion_stiffness, grid_spring_constants,
                       mesh_springs, mesh_structural_stiffness, triangle_areas)
 
@@ -128,6 +129,9 @@ def build_model(cfg: SceneConfig) -> Model:
                  slide_vertices=slide_index.astype(np.int64), slide_axes=slide_axis,
                  pieces=infos, initial_positions=_start_noise(cfg, infos, positions, triangles))
     model.load_notes = [note for piece in pieces for note in piece.notes]
+    uvs = scene_uvs(cfg, infos)
+    if uvs is not None:
+        model.uv, model.uv_index = uvs
     if any(piece.garment is not None for piece in pieces):
         garment_arrays(model, cfg, [piece.garment for piece in pieces], offsets)
         if cfg.garment.start_check:
