@@ -19,6 +19,7 @@ import numpy as np
 from .collision.surfaces import collider_surfaces
 from .config import format_config_error
 from .config.schema import ConfigError
+from .frame_fields import FRAME_FIELDS
 from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
 from .io.console import Progress, log
 from .io.h5writer import ResultWriter
@@ -85,7 +86,7 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None
                         attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names,
                         colliders=collider_surfaces(sim.contact.colliders,
                                                     sim.model.rest_positions),
-                        arrays=arrays)
+                        arrays=arrays, fields=FRAME_FIELDS)
 
 
 def sew_if_needed(sim, cfg, comm, path, *, force=False, quiet=False, cmdline_options=None,
@@ -216,7 +217,8 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
               f"{spec.tolerance:g}, at most {spec.max_iterations} iterations")
     relax = Relaxation(sim, spec)
     # a frame's 'time' is the iteration; the colliders are drawn where the state's time puts them
-    writer.write_frame(0, 0.0, sim.owned_positions(), body_time=sim.state.t)
+    writer.write_frame(0, 0.0, sim.owned_positions(), body_time=sim.state.t,
+                       fields=sim.frame_fields())
     bar = Progress(comm, spec.max_iterations, enabled=not quiet)
     status, code, k = "completed", 0, 0
     try:
@@ -226,7 +228,8 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
             writer.write_step(k, float(k), diag, times, calls)
             done = drape_converged(diag, spec)
             if done or k % spec.frame_every == 0 or k == spec.max_iterations:
-                writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t)
+                writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t,
+                                   fields=sim.frame_fields())
             bar.update(k, float(k))
             if done:
                 break

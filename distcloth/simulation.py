@@ -19,6 +19,7 @@ from .collision.contact import MAX_CONTACT_PASSES, ContactModel
 from .config.load import command_line_key
 from .config.schema import DEFAULT_SOLVER, OPTION_PREFIX, ConfigError
 from .energy_guard import EnergyGuard, gravity_scale
+from .frame_fields import FrameFields
 from .integrate import make_integrator
 from .io.console import log
 from .linalg.assembly import (assemble_blocks, constraint_impulses, gershgorin_bound,
@@ -81,6 +82,7 @@ class Simulation:
                            v=model.start_velocities()[local].astype(np.float64).copy())
         self._hold(model, lay)
         self.ghosts = GhostExchange(lay, comm)
+        self._fields = FrameFields(model, lay, comm.rank, self.ghosts)
         self.integrator = make_integrator(cfg)
         self.contact = ContactModel(cfg, model, lay, comm, self.ghosts, self.mass,
                                     np.concatenate([self.pinned_local, self.slide_local]),
@@ -375,7 +377,12 @@ class Simulation:
         }
 
     def _output(self, writer):
-        writer.write_frame(self.state.step, self.state.t, self.owned_positions())
+        writer.write_frame(self.state.step, self.state.t, self.owned_positions(),
+                           fields=self.frame_fields())
+
+    def frame_fields(self) -> dict:
+        """Collective: this rank's rows of the fields a frame records (frame_fields.py)."""
+        return self._fields.values(self.state)
 
     # ------------------------------------------------------------------ run
     def owned_positions(self) -> np.ndarray:

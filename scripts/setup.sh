@@ -2,9 +2,12 @@
 # Idempotent setup: Debian packages + the distcloth package in a venv with system site
 # packages, then numba's kernels compiled once.  libjs-three is the 3D library
 # `distcloth view` copies into its pages; chromium runs the viewer's test.
+# python3-paraview (ParaView 5.11's Python modules: the Xdmf3 and legacy XDMF
+# readers; Debian's python3-vtk9 has neither) and meshio (PyPI, with Debian's
+# rich) are there for the test that opens results with real readers.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
-PKGS="openssh-client openmpi-bin libopenmpi-dev libmetis-dev libmetis5 petsc-dev python3-petsc4py python3-mpi4py python3-h5py-mpi python3-numpy python3-scipy python3-yaml python3-numba python3-pytest python3-matplotlib python3-gmsh libjs-three chromium python3-venv python3-pip python3-setuptools"
+PKGS="openssh-client openmpi-bin libopenmpi-dev libmetis-dev libmetis5 petsc-dev python3-petsc4py python3-mpi4py python3-h5py-mpi python3-numpy python3-scipy python3-yaml python3-numba python3-pytest python3-matplotlib python3-gmsh libjs-three chromium python3-venv python3-pip python3-setuptools python3-paraview python3-rich"
 missing=""
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
@@ -22,6 +25,9 @@ fi
 if ! "$venv/bin/python" -c "import distcloth" 2>/dev/null || [ "$here/pyproject.toml" -nt "$venv/.installed" ]; then
   "$venv/bin/python" -m pip install -q --no-build-isolation --no-deps -e "$here" >/dev/null
   touch "$venv/.installed"
+fi
+if ! "$venv/bin/python" -c "import meshio" 2>/dev/null; then
+  "$venv/bin/python" -m pip install -q --no-deps "meshio==5.3.5" >/dev/null
 fi
 
 # numba compiles a kernel on its first call and caches it beside its source

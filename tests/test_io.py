@@ -357,14 +357,62 @@ def test_xdmf_rewritten_each_frame_and_valid(shared_dir):
         assert w.xdmf_path == os.path.join(shared_dir, "xd.xdmf")
         assert check_xdmf(w.xdmf_path) == []
         text = open(w.xdmf_path).read()
-        assert "xd.h5:/frames/positions" in text and shared_dir not in text   # relative
+        assert "xd.h5:/xdmf/frames/positions/000002" in text and shared_dir not in text   # relative
         root = ET.parse(w.xdmf_path).getroot()
-        coll = root.find("Domain/Grid")
+        coll = root.findall("Domain/Grid")[-1]      # the cloth's comes last (meshio reads the last)
+        assert coll.get("Name") == "cloth"
         assert coll.get("GridType") == "Collection" and coll.get("CollectionType") == "Temporal"
-        slab = root.findall(".//Geometry/DataItem")[2]
-        assert slab.get("ItemType") == "HyperSlab"
-        assert slab[0].text.split() == ["2", "0", "0", "1", "1", "1", "1", str(syn.n), "3"]
+        assert not root.findall(".//DataItem[@ItemType='HyperSlab']")
+        with h5py.File(path, "r") as f:
+            view = f["xdmf/frames/positions/000002"]
+            assert view.is_virtual and view.shape == (syn.n, 3)
+            assert np.array_equal(view[...], f["frames/positions"][2])
         assert not [p for p in os.listdir(shared_dir) if p.endswith(".tmp")]
+
+    on_root(check)
+
+
+def test_frame_fields_in_input_order_with_views(shared_dir):
+    """Per-vertex and per-triangle fields: each rank writes its rows (vertices
+    in its scrambled local order, triangles whose first vertex it owns) and
+    the file holds them in input order, with a view per frame for XDMF."""
+    syn = Synthetic(frames=3)
+    rng = np.random.default_rng(5)
+    nt = syn.triangles.shape[0]
+    vel = rng.standard_normal((3, syn.n, 3))
+    contact = rng.integers(0, 2, (3, syn.n)).astype(np.int8)
+    strain = rng.standard_normal((3, nt))
+    fields = [h5writer.FrameField("velocity", "vertex", 3), h5writer.FrameField("contact", dtype="i1"),
+              h5writer.FrameField("strain", "triangle")]
+    path = os.path.join(shared_dir, "fields.h5")
+    w = syn.writer(path, fields=fields)
+    mine_t = h5writer.triangle_rows(syn.triangles, syn.part, RANK)
+    assert np.array_equal(w.owned_triangles, mine_t)
+    for k in range(3):
+        syn.write_steps(w, k)
+        w.write_frame(int(syn.frame_step[k]), float(syn.frame_time[k]), syn.frames[k][syn.owned],
+                      fields={"velocity": vel[k][syn.owned], "contact": contact[k][syn.owned],
+                              "strain": strain[k][mine_t]})
+    all_ranks(raises(ValueError, "strain", lambda: w.write_frame(
+        9, 9.0, syn.frames[0][syn.owned], fields={"velocity": vel[0][syn.owned],
+                                                  "contact": contact[0][syn.owned]}))[0],
+              "a missing field is refused")
+    w.close()
+
+    def check():
+        with h5py.File(path, "r") as f:
+            assert np.array_equal(f["frames/velocity"][...], vel)
+            assert np.array_equal(f["frames/contact"][...], contact)
+            assert f["frames/contact"].dtype == np.int8
+            assert np.array_equal(f["frames/strain"][...], strain)
+            for k in range(3):
+                assert np.array_equal(f[f"xdmf/frames/strain/{k:06d}"][...], strain[k])
+                assert np.array_equal(f[f"xdmf/frames/velocity/{k:06d}"][...], vel[k])
+        assert check_xdmf(w.xdmf_path) == []
+        grid = ET.parse(w.xdmf_path).getroot().findall(".//Grid[@GridType='Uniform']")[-1]
+        centers = {a.get("Name"): a.get("Center") for a in grid.findall("Attribute")}
+        assert centers == {"position": "Node", "rank": "Node", "velocity": "Node",
+                           "contact": "Node", "strain": "Cell"}
 
     on_root(check)
 
@@ -381,9 +429,16 @@ def test_check_xdmf_catches_corruption(shared_dir):
         assert check_xdmf(w.xdmf_path) == []
         n, nt = syn.n, syn.triangles.shape[0]
         cases = {
-            "wrong source dims": good.replace(f'Dimensions="2 {n} 3"', f'Dimensions="2 {n - 1} 3"'),
+            "wrong source dims": good.replace(f'Dimensions="{n} 3"', f'Dimensions="{n - 1} 3"'),
             "wrong topology dims": good.replace(f'Dimensions="{nt} 3"', f'Dimensions="{nt + 1} 3"'),
-            "slab past the end": good.replace("1 0 0\n", "2 0 0\n"),
+            "frame past the end": good.replace("positions/000001", "positions/000002"),
+            "a hyperslab": good.replace(
+                f'<DataItem Dimensions="{n} 3" NumberType="Float" Precision="8" Format="HDF">'
+                'bad_xdmf.h5:/xdmf/frames/positions/000001</DataItem>',
+                f'<DataItem ItemType="HyperSlab" Dimensions="{n} 3" Type="HyperSlab">'
+                f'<DataItem Dimensions="3 3" Format="XML">1 0 0 1 1 1 1 {n} 3</DataItem>'
+                f'<DataItem Dimensions="2 {n} 3" NumberType="Float" Precision="8" Format="HDF">'
+                'bad_xdmf.h5:/frames/positions</DataItem></DataItem>'),
             "missing dataset": good.replace("/mesh/triangles", "/mesh/quads"),
             "wrong precision": good.replace('NumberType="Int" Precision="4"',
                                             'NumberType="Int" Precision="8"'),
@@ -395,6 +450,11 @@ def test_check_xdmf_catches_corruption(shared_dir):
                 fh.write(text)
             assert check_xdmf(bad), f"check_xdmf missed: {what}"
         assert any("Dimensions" in p for p in check_xdmf_text(shared_dir, cases["wrong source dims"]))
+        assert any("HyperSlab" in p for p in check_xdmf_text(shared_dir, cases["a hyperslab"]))
+        # a view mapping rows its source no longer has would read as zeros
+        with h5py.File(path, "a") as f:
+            f["frames/positions"].resize(1, axis=0)
+        assert any("beyond" in p for p in check_xdmf(w.xdmf_path))
 
     on_root(check)
 
@@ -593,7 +653,7 @@ def test_colliders_are_written_read_and_drawn(shared_dir):
 
     def check():
         with h5py.File(path, "r") as f:
-            assert f.attrs["format_version"] == 2
+            assert f.attrs["format_version"] == 3
             assert sorted(f["colliders"]) == ["arm_left", "ball", "floor"]
             ball, floor = f["colliders/ball"], f["colliders/floor"]
             assert (ball.attrs["shape"], bool(ball.attrs["moving"])) == ("sphere", True)
@@ -621,12 +681,12 @@ def test_colliders_are_written_read_and_drawn(shared_dir):
         one = read_colliders(path, frames=[1])["ball"]["positions"]
         np.testing.assert_array_equal(one[0], collider_surface(colliders[0], syn.frame_time[1],
                                                                np.zeros((2, 3)))[0])
-        # ParaView: the cloth and one temporal collection per collider
+        # ParaView: one temporal collection per collider, then the cloth's (meshio reads the last)
         sidecar = os.path.splitext(path)[0] + ".xdmf"
         assert check_xdmf(sidecar) == []
         series = ET.parse(sidecar).getroot().findall("Domain/Grid")
-        assert [g.get("Name") for g in series] == ["cloth", "collider ball", "collider floor",
-                                                   "collider arm/left"]
+        assert [g.get("Name") for g in series] == ["collider ball", "collider floor",
+                                                   "collider arm/left", "cloth"]
         assert all(len(g.findall("Grid")) == 3 for g in series)
         # a scene without colliders has no /colliders group
         with h5py.File(bare, "r") as f:

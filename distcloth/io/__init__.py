@@ -6,10 +6,11 @@ for the protocol); it takes the communicator wrapper of
 """
 from distcloth.io.h5read import read_attrs, read_colliders, read_result
 from distcloth.io.h5writer import CollectiveError, ResultWriter
-from distcloth.io.xdmf import XdmfAttribute, XdmfBody, check_xdmf, write_xdmf
+from distcloth.io.xdmf import XdmfAttribute, XdmfBody, XdmfSeries, check_xdmf, write_xdmf
 
 __all__ = ["ResultWriter", "CollectiveError", "read_result", "read_attrs", "read_colliders",
-           "write_xdmf", "check_xdmf", "XdmfAttribute", "XdmfBody", "write_previews"]
+           "write_xdmf", "check_xdmf", "XdmfAttribute", "XdmfBody", "XdmfSeries",
+           "write_previews"]
 
 
 def write_previews(h5_path, **kwargs):

@@ -10,6 +10,17 @@ Layout (every array in *input* vertex order, whatever the partition)::
     /config                    scalar UTF-8 string: the resolved configuration
     /frames/positions          (frames, n, 3) float64, chunks (1, min(n, 65536), 3)
     /frames/time, /frames/step (frames,) float64 / int64
+    /frames/<field>            per-frame fields the run declares (FrameField):
+                               (frames, n[, 3]) per vertex, in input vertex
+                               order, or (frames, nt[, 3]) per triangle, in
+                               /mesh/triangles order; a run writes velocity
+                               (n, 3), contact (n,) int8 and strain (nt,)
+    /xdmf/<dataset>/<k:06d>    virtual datasets, row k of each per-frame
+                               dataset above (positions, fields, moving
+                               colliders; row 0 of a collider that never
+                               moves), for the XDMF sidecar: its readers
+                               take no HyperSlab (xdmf.py).  No data is
+                               stored twice.
     /diagnostics/step, /time   (steps,) int64 / float64
     /diagnostics/<name>        (steps,) float64, one per diagnostic name
     /diagnostics/stage_time/<stage>   (steps,) float64 seconds
@@ -28,7 +39,7 @@ Layout (every array in *input* vertex order, whatever the partition)::
     the caller's ``attrs``.
 
 Format versions: 1 had no /colliders; 2 adds it (a scene without colliders
-has no /colliders group).
+has no /colliders group); 3 adds the per-frame fields and the /xdmf views.
 
 Colliders come as objects with ``name``, ``shape``, ``triangles`` (m, 3),
 ``moving`` and ``vertices(t)`` -> (nv, 3) (collision/surfaces.py makes them);
@@ -43,7 +54,8 @@ driver on its communicator, and then *every*
 method of :class:`ResultWriter` (the constructor, ``write_frame``,
 ``write_step``, ``record_error``, ``close``) is collective: all ranks call it,
 in the same order, with the same scalar arguments (only ``positions_owned``
-differs).  HDF5 metadata (dataset creation, resizing, attributes, flush,
+and the fields' rows differ).  A per-triangle field's row is written by the
+rank owning the triangle's first vertex (:func:`triangle_rows`).  HDF5 metadata (dataset creation, resizing, attributes, flush,
 close) must be changed identically on every rank or the file is silently
 corrupted, so the writer broadcasts rank 0's copy of everything that becomes
 metadata (attrs, names, error message) rather than trusting the caller.
@@ -65,16 +77,17 @@ from __future__ import annotations
 
 import os
 import warnings
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import h5py
 import numpy as np
 from h5py import h5fd, h5p, h5s
 
-from distcloth.io.xdmf import XdmfAttribute, XdmfBody, write_xdmf
+from distcloth.io.xdmf import XdmfAttribute, XdmfBody, XdmfSeries, frame_view
 
 FORMAT_NAME = "distcloth-result"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 # Above this many runs of consecutive input indices, a rank selects its rows
 # as points instead of an OR of hyperslabs: HDF5 1.10.8 merges each OR'ed
@@ -95,6 +108,38 @@ _RESERVED_ATTRS = frozenset(
     {"status", "error", "error_step", "frames_written", "steps_written",
      "format", "format_version"})
 _RESERVED_DIAGNOSTICS = frozenset({"step", "time", "stage_time", "stage_calls"})
+_RESERVED_FIELDS = frozenset({"positions", "time", "step", "position", "rank"})
+# XDMF NumberType and Precision of the dtypes a field may have
+_XDMF_TYPES = {"f8": ("Float", 8), "f4": ("Float", 4), "i8": ("Int", 8), "i4": ("Int", 4),
+               "i1": ("Int", 1)}
+
+
+@dataclass(frozen=True)
+class FrameField:
+    """A per-frame field written beside the positions: one row per vertex
+    (``on="vertex"``, rows in the rank's ``owned_input`` order like the
+    positions) or per triangle (``on="triangle"``, rows in the increasing
+    order of :func:`triangle_rows`), ``components`` 1 or 3 values each."""
+    name: str
+    on: str = "vertex"              # vertex | triangle
+    components: int = 1
+    dtype: str = "f8"               # a key of _XDMF_TYPES
+
+    def check(self) -> "FrameField":
+        _check_name("field", self.name)
+        if self.name in _RESERVED_FIELDS:
+            raise ValueError(f"field name {self.name!r} is reserved")
+        if self.on not in ("vertex", "triangle") or self.components not in (1, 3) \
+                or np.dtype(self.dtype).str[1:] not in _XDMF_TYPES:
+            raise ValueError(f"field {self.name!r}: on vertex|triangle, 1 or 3 components, "
+                             f"dtype one of {sorted(_XDMF_TYPES)}")
+        return self
+
+
+def triangle_rows(triangles: np.ndarray, part: np.ndarray, rank: int) -> np.ndarray:
+    """The triangles (indices, increasing) whose per-triangle field rows
+    ``rank`` writes: those whose first vertex it owns."""
+    return np.flatnonzero(np.asarray(part)[np.asarray(triangles)[:, 0]] == rank)
 
 
 class CollectiveError(RuntimeError):
@@ -186,41 +231,45 @@ def _runs(sorted_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _RowSelection:
-    """File selection of this rank's rows of /frames/positions, built once.
+    """File selection of this rank's rows of a (frames, n[, 3]) dataset such
+    as /frames/positions, built once.
 
-    The selection is made for frame 0 on a dataspace of extent (1, n, 3); per
-    frame it is copied, the extent grown to the dataset's and shifted by
+    The selection is made for frame 0 on a dataspace of extent (1, n[, 3]);
+    per frame it is copied, the extent grown to the dataset's and shifted by
     H5Soffset_simple.  HDF5 1.10.8 keeps a selection through
     H5Sset_extent_simple and applies the offset in (collective) I/O, so the
     expensive part is never repeated per frame.
     """
 
-    def __init__(self, sorted_owned: np.ndarray, n: int):
+    def __init__(self, sorted_owned: np.ndarray, n: int, width: int = 3):
         self.n = n
+        self.row = (width,) if width > 1 else ()     # a row's trailing dims
         starts, counts = _runs(sorted_owned)
         self.n_runs = int(starts.size)
         self.kind = "none" if starts.size == 0 else (
             "hyperslab" if starts.size <= MAX_HYPERSLAB_RUNS else "points")
-        space = h5s.create_simple((1, n, 3), (h5s.UNLIMITED, n, 3))
+        zeros = (0,) * len(self.row)
+        space = h5s.create_simple((1, n) + self.row, (h5s.UNLIMITED, n) + self.row)
         if self.kind == "none":
             space.select_none()   # a rank owning nothing still joins the collective write
         elif self.kind == "hyperslab":
             op = h5s.SELECT_SET
             for s, c in zip(starts.tolist(), counts.tolist()):
-                space.select_hyperslab((0, s, 0), (1, c, 3), op=op)
+                space.select_hyperslab((0, s) + zeros, (1, c) + self.row, op=op)
                 op = h5s.SELECT_OR
         else:
-            m = sorted_owned.size
-            coords = np.zeros((3 * m, 3), dtype=np.uint64)
-            coords[:, 1] = np.repeat(sorted_owned, 3)
-            coords[:, 2] = np.tile(np.arange(3, dtype=np.uint64), m)
+            m, w = sorted_owned.size, max(1, width)
+            coords = np.zeros((w * m, 2 + len(self.row)), dtype=np.uint64)
+            coords[:, 1] = np.repeat(sorted_owned, w)
+            if self.row:
+                coords[:, 2] = np.tile(np.arange(w, dtype=np.uint64), m)
             space.select_elements(coords)
         self._template = space
 
     def for_frame(self, k: int, n_frames: int):
         space = self._template.copy()
-        space.set_extent_simple((n_frames, self.n, 3), (h5s.UNLIMITED, self.n, 3))
-        space.offset_simple((k, 0, 0))
+        space.set_extent_simple((n_frames, self.n) + self.row, (h5s.UNLIMITED, self.n) + self.row)
+        space.offset_simple((k, 0) + (0,) * len(self.row))
         return space
 
 
@@ -233,7 +282,8 @@ class ResultWriter:
                  config_text: str, attrs: Mapping[str, Any],
                  stage_names: Sequence[str], diagnostic_names: Sequence[str],
                  colliders: Sequence[Any] = (), step_buffer: int = DEFAULT_STEP_BUFFER,
-                 arrays: Mapping[str, np.ndarray] | None = None):
+                 arrays: Mapping[str, np.ndarray] | None = None,
+                 fields: Sequence[FrameField] = ()):
         self.path = os.path.abspath(os.fspath(path))
         self._comm = _SerialComm() if comm is None else comm
         self.rank, self.size = int(self._comm.rank), int(self._comm.size)
@@ -270,9 +320,10 @@ class ResultWriter:
 
         # Everything that becomes HDF5 metadata must be identical on all
         # ranks: take rank 0's copy.
-        config_text, attrs, stage_names, diagnostic_names, bodies = self._comm.broadcast(
-            (str(config_text), dict(attrs), list(stage_names), list(diagnostic_names), bodies),
-            root=0)
+        config_text, attrs, stage_names, diagnostic_names, bodies, fields = self._comm.broadcast(
+            (str(config_text), dict(attrs), list(stage_names), list(diagnostic_names), bodies,
+             [FrameField(f.name, f.on, int(f.components), np.dtype(f.dtype).str[1:])
+              for f in fields]), root=0)
         if len(bodies) != len(colliders):
             raise ValueError(f"rank {self.rank}: {len(colliders)} colliders, rank 0 has "
                              f"{len(bodies)}; every rank must pass the same ones")
@@ -284,6 +335,9 @@ class ResultWriter:
                 raise ValueError(f"diagnostic name {name!r} is reserved")
         if len(set(stage_names)) != len(stage_names) or len(set(diagnostic_names)) != len(diagnostic_names):
             raise ValueError("stage and diagnostic names must be unique")
+        fields = [f.check() for f in fields]
+        if len({f.name for f in fields}) != len(fields):
+            raise ValueError("field names must be unique")
         bad = _RESERVED_ATTRS.intersection(attrs)
         if bad:
             raise ValueError(f"attrs {sorted(bad)} are reserved for the writer")
@@ -295,7 +349,15 @@ class ResultWriter:
         self._order = order                 # owned (local) order -> sorted input order
         self.n_owned = owned_input.size
         self._selection = _RowSelection(sorted_owned, n)
+        self.fields = tuple(fields)
+        self.owned_triangles = triangle_rows(triangles, part, self.rank)
+        # this rank's rows of each field's dataset: (rows owned, rows in all, row width)
+        self._field_rows = {f.name: (self.owned_triangles, self.n_triangles) if f.on == "triangle"
+                            else (sorted_owned, n) for f in self.fields}
+        self._field_selection = {f.name: _RowSelection(*self._field_rows[f.name], f.components)
+                                 for f in self.fields}
         self._times: list[float] = []
+        self._xdmf: XdmfSeries | None = None    # rank 0's sidecar
         self.frames_written = 0
         self.steps_written = 0
         self._closed = False
@@ -356,6 +418,13 @@ class ResultWriter:
             "frames/time", shape=(0,), maxshape=(None,), chunks=(256,), dtype=np.float64)
         self._frame_step = f.create_dataset(
             "frames/step", shape=(0,), maxshape=(None,), chunks=(256,), dtype=np.int64)
+        self._field_ds = {}
+        for fld in self.fields:
+            rows = self._field_rows[fld.name][1]
+            row = (3,) if fld.components == 3 else ()
+            self._field_ds[fld.name] = f.create_dataset(
+                f"frames/{fld.name}", shape=(0, rows) + row, maxshape=(None, rows) + row,
+                chunks=(1, max(1, min(rows, FRAME_CHUNK_VERTICES))) + row, dtype=fld.dtype)
 
         # Per-step tables: name -> (dataset, in-memory buffer column).
         self._buf_len = max(1, int(step_buffer))
@@ -396,6 +465,7 @@ class ResultWriter:
             else:
                 ds = g.create_dataset("positions", shape=(1, nv, 3), dtype=np.float64)
                 self._write_root(ds, x[None])
+                self._make_view(ds, 0)
             self._xdmf_bodies.append(XdmfBody(name, f"/colliders/{group}", nv, m, moving))
         f.flush()
 
@@ -450,13 +520,43 @@ class ResultWriter:
         if self.rank != 0:
             return
         try:
-            write_xdmf(self.xdmf_path, os.path.basename(self.path), self.n_vertices,
-                       self.n_triangles, self._times,
-                       extra_attributes=[XdmfAttribute("rank", "/partition/part", (self.n_vertices,),
-                                                       number_type="Int", precision=4)],
-                       bodies=self._xdmf_bodies)
+            if self._xdmf is None:
+                self._xdmf = XdmfSeries(os.path.basename(self.path), self.n_vertices,
+                                        self.n_triangles, self._xdmf_attributes(),
+                                        self._xdmf_bodies)
+            for t in self._times[len(self._xdmf):]:
+                self._xdmf.append(t)
+            self._xdmf.write(self.xdmf_path)
         except OSError as err:
             warnings.warn(f"could not write {self.xdmf_path}: {err}", RuntimeWarning)
+
+    def _xdmf_attributes(self) -> list[XdmfAttribute]:
+        out = [XdmfAttribute("rank", "/partition/part", (self.n_vertices,),
+                             number_type="Int", precision=4)]
+        for fld in self.fields:
+            number_type, precision = _XDMF_TYPES[fld.dtype]
+            rows = self._field_rows[fld.name][1]
+            out.append(XdmfAttribute(
+                fld.name, f"/frames/{fld.name}", (rows, 3) if fld.components == 3 else (rows,),
+                center="Cell" if fld.on == "triangle" else "Node",
+                attribute_type="Vector" if fld.components == 3 else "Scalar",
+                number_type=number_type, precision=precision, per_frame=True))
+        return out
+
+    def _make_view(self, ds: h5py.Dataset, k: int) -> None:
+        """Collective: the virtual dataset that is row k of ``ds`` (xdmf.frame_view)."""
+        layout = h5py.VirtualLayout(shape=ds.shape[1:], dtype=ds.dtype)
+        layout[...] = h5py.VirtualSource(".", ds.name, shape=ds.shape, dtype=ds.dtype)[k]
+        self._file.create_virtual_dataset(frame_view(ds.name, k), layout)
+
+    def _write_rows(self, ds: h5py.Dataset, selection: "_RowSelection", k: int,
+                    rows: np.ndarray) -> None:
+        """Collective: this rank's rows (sorted like its selection) of frame k."""
+        fspace = selection.for_frame(k, k + 1)
+        mspace = h5s.create_simple(rows.shape)
+        if rows.shape[0] == 0:
+            mspace.select_none()
+        self._write(ds, mspace, fspace, np.ascontiguousarray(rows))
 
     def _require_open(self) -> None:
         if self._closed:
@@ -465,11 +565,13 @@ class ResultWriter:
     # ------------------------------------------------------------ public API
 
     def write_frame(self, step: int, time: float, positions_owned: np.ndarray,
-                    body_time: float | None = None) -> None:
+                    body_time: float | None = None,
+                    fields: Mapping[str, np.ndarray] | None = None) -> None:
         """Collective: append one frame; each rank writes its own rows.
 
         ``positions_owned`` is (n_owned, 3) in this rank's ``owned_input``
-        order.  Moving colliders get a row each, their surface at
+        order; ``fields`` has a value for every declared field: per vertex
+        in the same order, per triangle in ``owned_triangles`` order.  Moving colliders get a row each, their surface at
         ``body_time`` (default ``time``; a drape's frame 'time' is its
         iteration).  Buffered steps are written first, and the file is
         flushed and the XDMF sidecar rewritten afterwards, so a crash later
@@ -479,6 +581,18 @@ class ResultWriter:
         data = np.asarray(positions_owned, dtype=np.float64)
         if data.shape != (self.n_owned, 3):
             raise ValueError(f"positions_owned must be ({self.n_owned}, 3), got {data.shape}")
+        fields = dict(fields or {})
+        if set(fields) != {f.name for f in self.fields}:
+            raise ValueError(f"fields {sorted(fields)} given, {[f.name for f in self.fields]} declared")
+        field_rows = {}
+        for fld in self.fields:
+            owned = self._field_rows[fld.name][0]
+            want = (owned.size, 3) if fld.components == 3 else (owned.size,)
+            value = np.asarray(fields[fld.name], dtype=fld.dtype)
+            if value.shape != want:
+                raise ValueError(f"field {fld.name!r} must be {want}, got {value.shape}")
+            # rows sorted by input index, like the positions
+            field_rows[fld.name] = value[self._order] if fld.on == "vertex" else value
         self._flush_steps()
         k = self.frames_written
         self._positions.resize(k + 1, axis=0)
@@ -486,12 +600,11 @@ class ResultWriter:
         self._frame_step.resize(k + 1, axis=0)
         # Rows sorted by input index, matching the order the selection
         # enumerates file elements in.
-        rows = np.ascontiguousarray(data[self._order])
-        fspace = self._selection.for_frame(k, k + 1)
-        mspace = h5s.create_simple((self.n_owned, 3))
-        if self.n_owned == 0:
-            mspace.select_none()
-        self._write(self._positions, mspace, fspace, rows)
+        self._write_rows(self._positions, self._selection, k, data[self._order])
+        for fld in self.fields:
+            ds = self._field_ds[fld.name]
+            ds.resize(k + 1, axis=0)
+            self._write_rows(ds, self._field_selection[fld.name], k, field_rows[fld.name])
         self._write_root(self._frame_time, np.array([time], np.float64), start=k)
         self._write_root(self._frame_step, np.array([step], np.int64), start=k)
         t_body = float(time if body_time is None else body_time)
@@ -502,6 +615,8 @@ class ResultWriter:
                                  f"{ds.shape[1]} at t = 0")
             ds.resize(k + 1, axis=0)
             self._write_root(ds, x[None], start=k)
+        for ds in [self._positions, *self._field_ds.values(), *(ds for _, ds in self._moving)]:
+            self._make_view(ds, k)
         self.frames_written = k + 1
         self._times.append(float(time))
         self._file.attrs["frames_written"] = np.int64(self.frames_written)
