@@ -88,8 +88,8 @@ STEP_STAGES: tuple[Stage, ...] = (
           "the proposed state becomes the state, ghosts refreshed"),
     Stage("diagnostics", "always", "committed state", "the step's diagnostics row",
           "energies, strain, speed, solver and contact counts"),
-    Stage("output", "every output interval", "x", "a frame in the result file",
-          "collective HDF5 write of the positions"),
+    Stage("output", "every output interval", "x, v, touching", "a frame in the result file",
+          "collective HDF5 write of the positions and the per-frame fields"),
 )
 
 STAGES = tuple(s.name for s in STEP_STAGES)

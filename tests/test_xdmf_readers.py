@@ -23,7 +23,7 @@ SCENE = ROOT / "configs" / "tablecloth_moving_sphere.yaml"
 ARGS = ["--quiet", "--set", "cloth.0.mesh.grid.resolution=[11, 11]", "--set", "time.end=0.3",
         "--set", "colliders.0.motion.times=[0.0, 0.1, 0.9, 2.2, 3.0]",
         "--set", "output.preview=false", "--set", "solver.ksp_rtol=1e-10"]
-READERS = ("xdmf3", "legacy", "meshio")
+READERS = ("xdmf3", "legacy", "paraview_xdmf3t", "paraview_xdmf", "meshio")
 
 
 @pytest.fixture(scope="module")
@@ -88,6 +88,7 @@ def test_every_reader_reads_every_frame(results, tmp_path):
                 got = seen[f"{pre}/{key}"]
                 assert got.shape == want.shape and np.array_equal(got, want), \
                     f"{reader} frame {k}: {key} differs from the HDF5 file"
+            assert f"{reader}/{k}/{cloth + 1}/points" not in seen, f"{reader}: extra blocks"
             if reader == "meshio":
                 continue          # its TimeSeriesReader reads one temporal collection
             for b, body in enumerate(bodies.values()):
