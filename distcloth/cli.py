@@ -1,4 +1,5 @@
-"""Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``
+"""Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``,
+``distcloth run SCENE.yaml --resume RESULT.h5``, ``distcloth inspect RESULT.h5`` (serial)
 and ``distcloth study NAME [options]`` (distcloth/study/).
 
 Arguments with a single leading dash (``-distcloth_ksp_rtol 1e-8``,
@@ -11,6 +12,7 @@ checked like ``--set linear_system.mat_type=aij``.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import traceback
 
@@ -68,6 +70,14 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "run":
             s.add_argument("--force", action="store_true",
                            help="run an explicit step above the stability limit anyway")
+            s.add_argument("--resume", metavar="RESULT.h5",
+                           help="go on from the checkpoint of this result file (or from this "
+                                "checkpoint), appending to the result; the scene must be the "
+                                "one it was run with, time.end may grow")
+    s = sub.add_parser("inspect", help="what a result file holds: scene, status, steps, "
+                                       "stage times (serial, no mpiexec)", allow_abbrev=False)
+    s.add_argument("result", help="HDF5 result file")
+    s.add_argument("--plots", action="store_true", help="write the preview pictures again")
     add_study_parsers(sub.add_parser("study", help="studies of the simulator (accuracy "
                                                    "against time, stability suite)",
                                      allow_abbrev=False))
@@ -78,6 +88,9 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ours, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(ours)
+    if args.command == "inspect":     # serial: no PETSc, no MPI
+        from .inspect import inspect
+        return inspect(args.result, plots=args.plots)
 
     init_petsc(petsc_args)
     # out of the database before PETSc could report them as unused options
@@ -87,6 +100,13 @@ def main(argv: list[str] | None = None) -> int:
         return _main(args, comm, command_line_options(), own_options)
     except SystemExit:
         raise
+    except KeyboardInterrupt:   # Ctrl-C outside the steps (set-up, sewing): no traceback
+        if comm.rank == 0:
+            sys.stderr.write("[distcloth] interrupted (SIGINT) before the run could stop "
+                             "cleanly: no checkpoint\n")
+        if comm.size > 1:
+            comm.abort(128 + signal.SIGINT)
+        return 128 + signal.SIGINT
     except BaseException:  # a bug: never leave the other ranks waiting
         sys.stderr.write(f"[distcloth rank {comm.rank}] unexpected error:\n{traceback.format_exc()}")
         if comm.size > 1:
@@ -122,7 +142,7 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
     if args.command == "drape":
         return drape(cfg, comm, output=args.output, cmdline_options=cmdline_options,
                      quiet=args.quiet)
-    return run(cfg, comm, output=args.output, force=args.force,
+    return run(cfg, comm, output=args.output, resume=args.resume, force=args.force,
                cmdline_options=cmdline_options, quiet=args.quiet)
 
 

@@ -6,24 +6,38 @@ Error protocol (every rank takes the same path, so none waits forever):
   * numerical failures (NaN, blow-up, solver failure) are agreed inside
     ``Simulation.step`` -> the error is recorded in the file, the frames
     already written stay, exit 1;
-  * anything unexpected is a bug -> traceback and MPI_Abort (in cli.py).
+  * anything unexpected is a bug -> traceback and MPI_Abort (in cli.py);
+  * SIGTERM or SIGINT while stepping -> the step ends on every rank, a
+    checkpoint is written, status 'interrupted', exit 128 + signal.
+
+Checkpoints (``output.checkpoint``, io/checkpoint.py, restart.py) are
+written every so many steps or seconds and when a run ends or is
+interrupted; ``--resume`` rebuilds the simulation from one and appends to
+the result file.
 """
 from __future__ import annotations
 
 import os
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from .collision.surfaces import collider_surfaces
 from .config import format_config_error
+from .config.compare import check_resumable
 from .config.schema import ConfigError
 from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
+from .interrupt import Interrupts, signal_name
+from .io.checkpoint import checkpoint_path, is_checkpoint, read_checkpoint, write_checkpoint
 from .io.console import Progress, log
-from .io.h5writer import ResultWriter
+from .io.h5read import read_attrs
+from .io.h5writer import FORMAT_NAME, ResultWriter
+from .io.liveness import ALIVE, DEAD, identity, judge
+from .restart import capture, restore_solver, restore_state
 from .scene import build_model
-from .sew import garment_arrays, sew
+from .sew import garment_arrays, sew, welded_model
 from .simulation import DIAGNOSTICS, Simulation, SimulationError
 from .stages import STAGES
 
@@ -37,14 +51,20 @@ def _agree_config(comm, err: ConfigError | None):
     return 0
 
 
-def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
-    """Build the model and the simulation; returns (sim, exit code)."""
+def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False, resume=None):
+    """Build the model and the simulation, from the checkpoint of ``resume``
+    (a Resume) if given; returns (sim, exit code)."""
     err = None
     model = None
     try:
         model = build_model(cfg)
+        if resume is not None and "weld_rows" in resume.arrays:
+            # a sewn garment: the same welded mesh from the same weld input
+            model = welded_model(cfg, model, resume.arrays["weld_rows"])
     except ConfigError as exc:
         err = exc
+    except ValueError as exc:     # the same on every rank: the model is replicated
+        err = ConfigError("--resume", resume.checkpoint, f"its garment cannot be welded again: {exc}")
     code = _agree_config(comm, err)
     if code:
         return None, code
@@ -52,7 +72,11 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
     try:
         sim = Simulation(cfg, model, comm, force_explicit=force,
                          cmdline_options=cmdline_options, quiet=quiet)
+        if resume is not None:
+            restore_state(sim, resume.scalars, resume.arrays)
         sim.prepare()
+        if resume is not None:
+            restore_solver(sim, resume.scalars, resume.arrays)
     except ConfigError as exc:
         err = exc
     code = _agree_config(comm, err)
@@ -61,10 +85,88 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
     return sim, 0
 
 
-def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None):
+@dataclass
+class Resume:
+    """What ``--resume`` continues: the checkpoint and the result file it belongs to."""
+    checkpoint: str
+    result: str
+    scalars: dict
+    arrays: dict
+    killed: str | None = None      # how the run that wrote the result ended, if it was killed
+
+
+def open_resume(cfg, comm, target: str, output: str | None):
+    """The Resume of ``--resume TARGET`` (a result file or its checkpoint), read
+    on rank 0 and broadcast; (None, 2) after a config error on every rank."""
+    resume, message = None, None
+    if comm.rank == 0:
+        try:
+            resume = _read_resume(cfg, target, output)
+        except ConfigError as exc:
+            message = format_config_error(exc)
+    resume, message = comm.broadcast((resume, message))
+    if message is not None:
+        if comm.rank == 0:
+            print(message, file=sys.stderr, flush=True)
+        return None, 2
+    return resume, 0
+
+
+def _read_resume(cfg, target: str, output: str | None) -> Resume:
+    if output is not None:
+        raise ConfigError("--output", output, "not with --resume: the run goes on in the "
+                                              "resumed result file")
+    if not os.path.isfile(target):
+        raise ConfigError("--resume", target, "an existing result file or its checkpoint")
+    killed = None
+    if is_checkpoint(target):
+        ckpt = os.path.abspath(target)
+        attrs = read_attrs(ckpt)
+        result = os.path.join(os.path.dirname(ckpt), str(attrs.get("result", "")))
+        if not os.path.isfile(result):
+            raise ConfigError("--resume", target, f"a checkpoint beside its result file "
+                                                  f"({result} does not exist)")
+    else:
+        result = os.path.abspath(target)
+        try:
+            attrs = read_attrs(result)
+        except OSError as exc:
+            raise ConfigError("--resume", target, f"a distcloth result file or checkpoint "
+                                                  f"(cannot read it: {exc})") from None
+        if attrs.get("format") != FORMAT_NAME:
+            raise ConfigError("--resume", target, "a distcloth result file or checkpoint")
+        ckpt = os.path.join(os.path.dirname(result),
+                            str(attrs.get("checkpoint") or os.path.basename(checkpoint_path(result))))
+        if not os.path.isfile(ckpt):
+            raise ConfigError("--resume", target, f"a result with a checkpoint: {ckpt} does not "
+                                                  f"exist (the run stopped before its first "
+                                                  f"checkpoint, or while sewing)")
+    attrs = read_attrs(result)
+    if attrs.get("status") == "running":
+        state, why = judge(attrs)
+        if state == ALIVE:
+            raise ConfigError("--resume", target, f"a result no run is writing: {why}")
+        killed = why
+    try:
+        scalars, text, arrays = read_checkpoint(ckpt)
+    except (OSError, ValueError) as exc:
+        raise ConfigError("--resume", ckpt, f"a readable checkpoint ({exc})") from None
+    check_resumable(text, cfg.source_text)
+    if cfg.time.end < float(scalars["time"]) - 1e-12:
+        raise ConfigError("time.end", cfg.time.end, f"at least the checkpoint's time "
+                                                    f"{float(scalars['time']):g} s")
+    return Resume(ckpt, result, scalars, arrays, killed)
+
+
+
+
+def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None,
+                resume_step=None):
     """The run's result file, with what the run was and the colliders' surfaces,
-    which every frame then records (collective)."""
+    which every frame then records (collective); ``resume_step``: go on
+    writing the existing file after that step."""
     lay = sim.layout
+    hosts, pids = zip(*comm.gather_objects(identity()))
     attrs = {
         "scene": cfg.scene, "ranks": comm.size, "integrator": cfg.time.integrator,
         "time_step": cfg.time.step,
@@ -73,6 +175,7 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None
             [sim.system.block_jacobi_blocks() if sim.system else 0]))[0]),
         "rows_per_rank": [int(v) for v in 3 * (lay.ownership[1:] - lay.ownership[:-1])],
         "edge_cut": lay.edge_cut, "imbalance": lay.imbalance, "cloth_size": sim.model.size(),
+        "hosts": list(hosts), "pids": [int(p) for p in pids],
         **extra_attrs,
     }
     return ResultWriter(path, comm if comm.under_mpiexec else None,
@@ -81,15 +184,16 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None
                         attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names,
                         colliders=collider_surfaces(sim.contact.colliders,
                                                     sim.model.rest_positions),
-                        arrays=arrays)
+                        arrays=arrays, resume_step=resume_step)
 
 
 def sew_if_needed(sim, cfg, comm, path, *, force=False, quiet=False, cmdline_options=None,
                   progress=True):
     """A scene with stitches is sewn and welded first (sew.py); returns the
-    simulation to go on with and an exit code (1: the sewing failed)."""
+    simulation to go on with, an exit code (1: the sewing failed) and what
+    the weld was made from ((rows, t, step), for checkpoints; None unsewn)."""
     if sim.model.stitch_pairs is None:
-        return sim, 0
+        return sim, 0, None
     try:
         sim, figures = sew(sim, cfg, comm, path,
                            lambda s, p, names, attrs: open_writer(s, cfg, comm, p, names, attrs),
@@ -97,16 +201,20 @@ def sew_if_needed(sim, cfg, comm, path, *, force=False, quiet=False, cmdline_opt
                            cmdline_options=cmdline_options)
     except SimulationError as exc:
         log(comm, f"stopped: {exc}")
-        return None, 1
+        return None, 1, None
     log(comm, f"sewn in {figures['sewing_time']:g} s ({figures['sewing_steps']} steps), widest "
               f"stitch {1e3 * figures['stitch_gap']:.2f} mm")
-    return sim, 0
+    return sim, 0, figures["weld"]
 
 
-def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
-    """Steps 1..n_steps: each step's diagnostics row, a frame every ``every`` steps
-    and after the last; raises SimulationError as ``sim.step`` does (collective)."""
-    for k in range(1, n_steps + 1):
+def write_steps(sim, writer, n_steps: int, every: int, bar=None, after_step=None,
+                first: int = 0) -> int:
+    """Steps ``first``+1..n_steps of a phase that started at step
+    ``sim.state.step - first``: each step's diagnostics row, a frame every
+    ``every`` steps and after the last; ``after_step()`` (collective) may
+    stop the run by returning a signal number, which is returned (0: all
+    steps done).  Raises SimulationError as ``sim.step`` does (collective)."""
+    for k in range(first + 1, n_steps + 1):
         diag = sim.step()
         # the step's row first, so the frame's flush carries it; the output
         # stage's time is charged to the following step's row
@@ -115,27 +223,93 @@ def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
         if k % every == 0 or k == n_steps:
             sim.pipeline.run("output", writer)
         if bar:
-            bar.update(k, sim.state.t)
+            bar.update(k - first, sim.state.t)
+        stop = after_step() if after_step is not None else 0
+        if stop:
+            return stop
+    return 0
 
 
-def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only=False,
-        quiet=False, progress=True) -> int:
+class Checkpoints:
+    """When and how a run writes its checkpoint (collective methods)."""
+
+    def __init__(self, sim, cfg, comm, writer, path: str, extra: dict, interrupts):
+        self.sim, self.cfg, self.comm, self.writer = sim, cfg, comm, writer
+        self.path, self.result = checkpoint_path(path), os.path.basename(path)
+        self.extra, self.interrupts = extra, interrupts
+        spec = cfg.output.checkpoint
+        self.every_steps, self.every_seconds = spec.every_steps, spec.every_seconds
+        self.last = time.monotonic()
+
+    def after_step(self) -> int:
+        """At the end of every step: the ranks agree on a signal any of them
+        received and on rank 0's clock; a checkpoint if one is due or the run
+        stops.  Returns the signal that stops the run, or 0."""
+        step = self.sim.state.step
+        received = self.interrupts.pending(step)
+        late = bool(self.comm.rank == 0 and self.every_seconds is not None
+                    and time.monotonic() - self.last >= self.every_seconds)
+        signum, due = self.comm.max(np.array([float(received), float(late)]))
+        if signum or due or (self.every_steps and step % self.every_steps == 0):
+            self.write()
+        return int(signum)
+
+    def write(self) -> None:
+        """The checkpoint of the current state; the result file flushed first,
+        so it holds every step up to it.  A checkpoint that cannot be written
+        is reported, not fatal: the run's frames are still being written."""
+        self.writer.flush()
+        scalars, arrays = capture(self.sim, self.extra.get("weld"))
+        error = None
+        if self.comm.rank == 0:
+            attrs = {**scalars, "result": self.result, "ranks": self.comm.size,
+                     "phase_start_step": int(self.extra["phase_start_step"])}
+            try:
+                write_checkpoint(self.path, self.cfg.source_text, attrs, arrays)
+            except OSError as exc:
+                error = f"warning: checkpoint not written: {exc}"
+        agreed = self.comm.agree(error)    # every rank returns once rank 0 has renamed
+        if agreed is not None:
+            log(self.comm, agreed[1])
+        self.last = time.monotonic()
+
+
+def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=None,
+        check_only=False, quiet=False, progress=True) -> int:
+    """``distcloth run`` (and ``check``); ``resume``: a result file or
+    checkpoint to go on from (``--resume``)."""
     t_start = time.perf_counter()
-    sim, code = setup(cfg, comm, force=force, cmdline_options=cmdline_options, quiet=quiet)
+    restart = None
+    if resume is not None and not check_only:
+        restart, code = open_resume(cfg, comm, resume, output)
+        if code:
+            return code
+    sim, code = setup(cfg, comm, force=force, cmdline_options=cmdline_options, quiet=quiet,
+                      resume=restart)
     if code:
         return code
     if check_only:
         log(comm, "check: the scene is valid")
         sim.destroy()
         return 0
-    path = output or cfg.output.file
     h = cfg.time.step
-    sim, code = sew_if_needed(sim, cfg, comm, path, force=force, quiet=quiet,
-                              cmdline_options=cmdline_options, progress=progress)
-    if code:
-        return code
+    if restart is None:
+        path = output or cfg.output.file
+        sim, code, weld = sew_if_needed(sim, cfg, comm, path, force=force, quiet=quiet,
+                                        cmdline_options=cmdline_options, progress=progress)
+        if code:
+            return code
+        phase_start = sim.state.step
+    else:
+        path = restart.result
+        weld = None
+        if "weld_rows" in restart.arrays:
+            weld = (restart.arrays["weld_rows"], restart.scalars["weld_time"],
+                    restart.scalars["weld_step"])
+        phase_start = int(restart.scalars["phase_start_step"])
     # a sewn garment goes on from the time its sewing ended, to time.end
-    n_steps = max(0, max(1, int(round(cfg.time.end / h))) - sim.state.step)
+    n_steps = max(0, max(1, int(round(cfg.time.end / h))) - phase_start)
+    done = sim.state.step - phase_start
     every = max(1, int(round(cfg.output.every / h)))
     bounds = sim.contact.image_error_bounds()
     image = {f"image_error_bound/{name}": list(bound) for name, bound in bounds.items()}
@@ -146,23 +320,42 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         if c.region is not None:
             log(comm, f"collider {c.name} in contact: {c.region}")
     writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
-                         {"steps": n_steps, "output_every_steps": every, **image},
-                         garment_arrays(sim.model))
-    log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
-    sim.pipeline.run("output", writer)
+                         {"steps": n_steps, "output_every_steps": every,
+                          "checkpoint": os.path.basename(checkpoint_path(path)), **image},
+                         garment_arrays(sim.model),
+                         resume_step=None if restart is None else sim.state.step)
+    if restart is None:
+        log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
+        sim.pipeline.run("output", writer)
+    else:
+        if restart.killed:
+            log(comm, restart.killed)
+        log(comm, f"resuming {os.path.abspath(path)} from {restart.checkpoint}: step {done} of "
+                  f"{n_steps} (t = {sim.state.t:g} s), {comm.size} ranks")
     sim.pipeline.take_step_counters()
-    bar = Progress(comm, n_steps, enabled=progress and not quiet)
-    status, code = "completed", 0
-    try:
-        write_steps(sim, writer, n_steps, every, bar)
-    except SimulationError as exc:
-        log(comm, f"stopped: {exc}")
-        writer.record_error(exc.step, str(exc))
-        status, code = "failed", 1
+    bar = Progress(comm, n_steps - done, enabled=progress and not quiet)
+    status, code, signum = "completed", 0, 0
+    with Interrupts(comm.rank) as interrupts:
+        checkpoints = Checkpoints(sim, cfg, comm, writer, path,
+                                  {"weld": weld, "phase_start_step": phase_start}, interrupts)
+        try:
+            signum = write_steps(sim, writer, n_steps, every, bar, checkpoints.after_step, done)
+            if not signum:
+                checkpoints.write()     # a finished run can be extended (a later time.end)
+        except SimulationError as exc:
+            log(comm, f"stopped: {exc}")
+            writer.record_error(exc.step, str(exc))
+            status, code = "failed", 1
+    if signum:
+        writer.record_interrupt(sim.state.step, signal_name(signum))
+        status, code = "interrupted", 128 + signum
     writer.close(status)
     wall = time.perf_counter() - t_start
     traversal = sim.contact.traversal_summary()      # collective
-    if not quiet:
+    if signum:
+        log(comm, f"interrupted by {signal_name(signum)} after step {sim.state.step} "
+                  f"(t = {sim.state.t:g} s): go on with --resume {os.path.abspath(path)}")
+    elif not quiet:
         log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
         if traversal:
             log(comm, traversal)
@@ -172,7 +365,7 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
                       f"{cfg.strain_limiting.passes}; limited_strain in the diagnostics)")
         log(comm, f"{status} in {wall:.2f} s: {os.path.abspath(path)} "
                   f"(+ {os.path.splitext(os.path.basename(path))[0]}.xdmf for ParaView)")
-    _previews(cfg, comm, path)
+    _previews(cfg, comm, path, quiet=bool(signum))
     sim.destroy()
     return code
 
@@ -180,14 +373,16 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
 def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     """``distcloth drape``: relax to the rest state (Volino and Magnenat-Thalmann
     2007); a frame every ``drape.frame_every`` iterations and the last; frame
-    'time' is the iteration."""
+    'time' is the iteration.  SIGTERM or SIGINT ends it after the iteration
+    (status 'interrupted'); a relaxation has no checkpoint: it starts again."""
     t_start = time.perf_counter()
     sim, code = setup(cfg, comm, cmdline_options=cmdline_options, quiet=quiet)
     if code:
         return code
     spec = cfg.drape
     path = output or cfg.output.file
-    sim, code = sew_if_needed(sim, cfg, comm, path, quiet=quiet, cmdline_options=cmdline_options)
+    sim, code, _ = sew_if_needed(sim, cfg, comm, path, quiet=quiet,
+                                 cmdline_options=cmdline_options)
     if code:
         return code
     writer = open_writer(sim, cfg, comm, path, list(DRAPE_DIAGNOSTICS),
@@ -199,27 +394,35 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     # a frame's 'time' is the iteration; the colliders are drawn where the state's time puts them
     writer.write_frame(0, 0.0, sim.owned_positions(), body_time=sim.state.t)
     bar = Progress(comm, spec.max_iterations, enabled=not quiet)
-    status, code, k = "completed", 0, 0
-    try:
-        for k in range(1, spec.max_iterations + 1):
-            diag = relax.iterate()
-            times, calls = sim.pipeline.take_step_counters()
-            writer.write_step(k, float(k), diag, times, calls)
-            done = drape_converged(diag, spec)
-            if done or k % spec.frame_every == 0 or k == spec.max_iterations:
-                writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t)
-            bar.update(k, float(k))
-            if done:
-                break
-        else:
-            raise SimulationError(k, f"drape did not converge in {spec.max_iterations} iterations "
-                                     f"(residual {diag['residual']:.3g} > {spec.tolerance:g})")
-    except SimulationError as exc:
-        log(comm, f"stopped: {exc}")
-        writer.record_error(exc.step, str(exc))
-        status, code = "failed", 1
+    status, code, k, signum = "completed", 0, 0, 0
+    with Interrupts(comm.rank) as interrupts:
+        try:
+            for k in range(1, spec.max_iterations + 1):
+                diag = relax.iterate()
+                times, calls = sim.pipeline.take_step_counters()
+                writer.write_step(k, float(k), diag, times, calls)
+                done = drape_converged(diag, spec)
+                signum = int(comm.max(np.array([float(interrupts.pending(k))]))[0])
+                if done or signum or k % spec.frame_every == 0 or k == spec.max_iterations:
+                    writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t)
+                bar.update(k, float(k))
+                if done or signum:
+                    break
+            else:
+                raise SimulationError(k, f"drape did not converge in {spec.max_iterations} "
+                                         f"iterations (residual {diag['residual']:.3g} > "
+                                         f"{spec.tolerance:g})")
+        except SimulationError as exc:
+            log(comm, f"stopped: {exc}")
+            writer.record_error(exc.step, str(exc))
+            status, code = "failed", 1
+    if signum:
+        writer.record_interrupt(k, signal_name(signum))
+        status, code = "interrupted", 128 + signum
+        log(comm, f"interrupted by {signal_name(signum)} after iteration {k}: a drape has no "
+                  f"checkpoint, run it again to finish")
     writer.close(status)
-    _previews(cfg, comm, path)
+    _previews(cfg, comm, path, quiet=bool(signum))
     if code == 0:
         log(comm, f"converged in {k} iterations ({relax.stops} stops), residual "
                   f"{diag['residual']:.3g}, {time.perf_counter() - t_start:.2f} s: {os.path.abspath(path)}")
@@ -227,12 +430,13 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     return code
 
 
-def _previews(cfg, comm, path):
+def _previews(cfg, comm, path, quiet=False):
     if cfg.output.preview and comm.rank == 0:
         try:
             # matplotlib takes a second to import: only runs that draw pay for it
             from .io.preview import write_previews
             for p in write_previews(path):
-                log(comm, f"preview: {os.path.abspath(p)}")
+                if not quiet:
+                    log(comm, f"preview: {os.path.abspath(p)}")
         except Exception as exc:   # a picture must never turn a finished run into a failure
             log(comm, f"preview failed: {exc}")
