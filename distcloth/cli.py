@@ -88,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ours, petsc_args = split_petsc_args(argv)
     args = build_parser().parse_args(ours)
-    if args.command == "inspect":     # serial: no PETSc, no MPI
+    if args.command == "inspect":
+        # serial: imported here so that it starts neither PETSc nor MPI
         from .inspect import inspect
         return inspect(args.result, plots=args.plots)
 

@@ -119,6 +119,7 @@ def inspect(path: str, plots: bool = False) -> int:
         return 2
     print("\n".join(lines), flush=True)
     if plots:
+        # matplotlib takes a second to import: only --plots pays for it
         from .io.preview import write_previews
         for p in write_previews(path):
             print(f"preview: {os.path.abspath(p)}")

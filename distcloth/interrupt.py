@@ -4,7 +4,7 @@ The handler only records the signal; the driver asks ``pending()`` at the
 end of every step and the ranks agree on it (a signal that reached one rank
 stops them all at the same step: mpiexec forwards a signal to every rank,
 ``kill`` on one pid does not).  A second signal exits at once with 128 +
-its number, without cleaning up.
+its number (the signal's default action), without cleaning up.
 
 Test hook: ``DISTCLOTH_SIGNAL_AT=RANK:STEP[:NAME]`` makes that rank send
 itself the signal NAME (default TERM; KILL for a killed run) when that
@@ -49,7 +49,10 @@ class Interrupts:
     def _handle(self, signum, frame) -> None:
         if self.signum:
             os.write(2, f"[distcloth] second {signal_name(signum)}: stopping at once\n".encode())
-            os._exit(128 + signum)
+            # the default action: the process ends by the signal (status 128 + signal)
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
         self.signum = signum
 
     def pending(self, step: int) -> int:
