@@ -579,8 +579,8 @@ class StealSpec:
 
 @dataclass(frozen=True)
 class CheckpointSpec:
-    """When a run writes its checkpoint (``<output stem>.checkpoint.h5``, read by
-    ``distcloth run --resume``); a run also writes one when it ends or is
+    """When a run writes its checkpoint (`<output stem>.checkpoint.h5`, read by
+    `distcloth run --resume`); a run also writes one when it ends or is
     interrupted (SIGTERM, SIGINT)."""
     every_steps: int | None = setting(None, doc="write one every this many steps; null: not "
                                       "by steps", at_least=1)
