@@ -1,4 +1,5 @@
 """Command line: ``distcloth run|check SCENE.yaml [--output F] [--set k=v ...] [PETSc options]``,
+``distcloth run SCENE.yaml --resume RESULT.h5``, ``distcloth inspect RESULT.h5`` (serial),
 ``distcloth study NAME [options]`` (distcloth/study/) and the serial tools on
 a result file, ``distcloth export|view RESULT.h5 [options]`` (io/commands.py).
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import traceback
 
@@ -91,6 +93,14 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "run":
             s.add_argument("--force", action="store_true",
                            help="run an explicit step above the stability limit anyway")
+            s.add_argument("--resume", metavar="RESULT.h5",
+                           help="go on from the checkpoint of this result file (or from this "
+                                "checkpoint), appending to the result; the scene must be the "
+                                "one it was run with, time.end may grow")
+    s = sub.add_parser("inspect", help="what a result file holds: scene, status, steps, "
+                                       "stage times (serial, no mpiexec)", allow_abbrev=False)
+    s.add_argument("result", help="HDF5 result file")
+    s.add_argument("--plots", action="store_true", help="write the preview pictures again")
     add_study_parsers(sub.add_parser("study", help="studies of the simulator (accuracy "
                                                    "against time, stability suite)",
                                      allow_abbrev=False))
@@ -109,6 +119,10 @@ def main(argv: list[str] | None = None) -> int:
                                                   f"{args.command}")), file=sys.stderr)
             return 2
         return run_result_command(args)
+    if args.command == "inspect":
+        # serial: imported here so that it starts neither PETSc nor MPI
+        from .inspect import inspect
+        return inspect(args.result, plots=args.plots)
 
     message = _unreadable_options_file(petsc_args)
     if message is not None:       # PETSc reads it on rank 0 only: the others would wait for it
@@ -128,6 +142,13 @@ def main(argv: list[str] | None = None) -> int:
         return _main(args, comm, command_line_options(), own_options)
     except SystemExit:
         raise
+    except KeyboardInterrupt:   # Ctrl-C outside the steps (set-up, sewing): no traceback
+        if comm.rank == 0:
+            sys.stderr.write("[distcloth] interrupted (SIGINT) before the run could stop "
+                             "cleanly: no checkpoint\n")
+        if comm.size > 1:
+            comm.abort(128 + signal.SIGINT)
+        return 128 + signal.SIGINT
     except BaseException:  # a bug: never leave the other ranks waiting
         sys.stderr.write(f"[distcloth rank {comm.rank}] unexpected error:\n{traceback.format_exc()}")
         if comm.size > 1:
@@ -154,8 +175,10 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
             path = output or cfg.output.file
             # a garment being sewn also writes its sewing phase beside the result
             sewn = any(spec.mesh.pattern is not None for spec in cfg.cloth)
-            for p in [path, sewing_path(path)] if sewn else [path]:
-                # replacing an existing result: --overwrite (a resumed run appends to it)
+            # a resumed run appends to the result file it names (checked by run.py)
+            resumed = getattr(args, "resume", None) is not None
+            for p in [] if resumed else [path, sewing_path(path)] if sewn else [path]:
+                # replacing an existing result: --overwrite
                 check_output_path(p, "--output" if output else "output.file",
                                   replace=args.overwrite)
         except ConfigError as exc:
@@ -171,7 +194,7 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
     if args.command == "drape":
         return drape(cfg, comm, output=args.output, cmdline_options=cmdline_options,
                      quiet=args.quiet)
-    return run(cfg, comm, output=args.output, force=args.force,
+    return run(cfg, comm, output=args.output, resume=args.resume, force=args.force,
                cmdline_options=cmdline_options, quiet=args.quiet)
 
 

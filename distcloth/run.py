@@ -6,7 +6,14 @@ Error protocol (every rank takes the same path, so none waits forever):
   * numerical failures (NaN, blow-up, solver failure) are agreed inside
     ``Simulation.step`` -> the error is recorded in the file, the frames
     already written stay, exit 1;
-  * anything unexpected is a bug -> traceback and MPI_Abort (in cli.py).
+  * anything unexpected is a bug -> traceback and MPI_Abort (in cli.py);
+  * SIGTERM or SIGINT while stepping -> the step ends on every rank, a
+    checkpoint is written, status 'interrupted', exit 128 + signal.
+
+Checkpoints (``output.checkpoint``, io/checkpoint.py, restart.py) are
+written every so many steps or seconds and when a run ends or is
+interrupted; ``--resume`` rebuilds the simulation from one and appends to
+the result file.
 """
 from __future__ import annotations
 
@@ -21,10 +28,15 @@ from .config import format_config_error
 from .config.schema import ConfigError
 from .frame_fields import FRAME_FIELDS
 from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
+from .interrupt import Interrupts, signal_name
+from .checkpointing import Checkpoints, open_resume
+from .io.checkpoint import checkpoint_path
 from .io.console import Progress, log
 from .io.h5writer import ResultWriter
+from .io.liveness import identity
+from .restart import restore_solver, restore_state
 from .scene import build_model
-from .sew import garment_arrays, sew
+from .sew import garment_arrays, sew, welded_model
 from .simulation import DIAGNOSTICS, Simulation, SimulationError
 from .stages import STAGES
 
@@ -38,16 +50,22 @@ def _agree_config(comm, err: ConfigError | None):
     return 0
 
 
-def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
-    """Build the model and the simulation; returns (sim, exit code)."""
+def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False, resume=None):
+    """Build the model and the simulation, from the checkpoint of ``resume``
+    (a Resume) if given; returns (sim, exit code)."""
     err = None
     model = None
     try:
         model = build_model(cfg)
+        if resume is not None and "weld_rows" in resume.arrays:
+            # a sewn garment: the same welded mesh from the same weld input
+            model = welded_model(cfg, model, resume.arrays["weld_rows"])
     except ConfigError as exc:
         err = exc
     except MemoryError:      # past the up-front estimate (scene/build.py): still one line
         err = ConfigError("cloth", "the scene", "a scene whose model fits in memory")
+    except ValueError as exc:     # the same on every rank: the model is replicated
+        err = ConfigError("--resume", resume.checkpoint, f"its garment cannot be welded again: {exc}")
     code = _agree_config(comm, err)
     if code:
         return None, code
@@ -57,7 +75,11 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
     try:
         sim = Simulation(cfg, model, comm, force_explicit=force,
                          cmdline_options=cmdline_options, quiet=quiet)
+        if resume is not None:
+            restore_state(sim, resume.scalars, resume.arrays)
         sim.prepare()
+        if resume is not None:
+            restore_solver(sim, resume.scalars, resume.arrays)
     except ConfigError as exc:
         err = exc
     code = _agree_config(comm, err)
@@ -66,10 +88,13 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False):
     return sim, 0
 
 
-def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None):
+def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None,
+                resume_step=None):
     """The run's result file, with what the run was and the colliders' surfaces,
-    which every frame then records (collective)."""
+    which every frame then records (collective); ``resume_step``: go on
+    writing the existing file after that step."""
     lay = sim.layout
+    hosts, pids = zip(*comm.gather_objects(identity()))
     attrs = {
         "scene": cfg.scene, "ranks": comm.size, "integrator": cfg.time.integrator,
         "time_step": cfg.time.step,
@@ -78,6 +103,7 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None
             [sim.system.block_jacobi_blocks() if sim.system else 0]))[0]),
         "rows_per_rank": [int(v) for v in 3 * (lay.ownership[1:] - lay.ownership[:-1])],
         "edge_cut": lay.edge_cut, "imbalance": lay.imbalance, "cloth_size": sim.model.size(),
+        "hosts": list(hosts), "pids": [int(p) for p in pids],
         **extra_attrs,
     }
     return ResultWriter(path, comm if comm.under_mpiexec else None,
@@ -86,15 +112,16 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None
                         attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names,
                         colliders=collider_surfaces(sim.contact.colliders,
                                                     sim.model.rest_positions),
-                        arrays=arrays, fields=FRAME_FIELDS)
+                        arrays=arrays, fields=FRAME_FIELDS, resume_step=resume_step)
 
 
 def sew_if_needed(sim, cfg, comm, path, *, force=False, quiet=False, cmdline_options=None,
                   progress=True):
     """A scene with stitches is sewn and welded first (sew.py); returns the
-    simulation to go on with and an exit code (1: the sewing failed)."""
+    simulation to go on with, an exit code (1: the sewing failed) and what
+    the weld was made from ((rows, t, step), for checkpoints; None unsewn)."""
     if sim.model.stitch_pairs is None:
-        return sim, 0
+        return sim, 0, None
     try:
         sim, figures = sew(sim, cfg, comm, path,
                            lambda s, p, names, attrs: open_writer(s, cfg, comm, p, names, attrs),
@@ -102,16 +129,20 @@ def sew_if_needed(sim, cfg, comm, path, *, force=False, quiet=False, cmdline_opt
                            cmdline_options=cmdline_options)
     except SimulationError as exc:
         log(comm, f"stopped: {exc}")
-        return None, 1
+        return None, 1, None
     log(comm, f"sewn in {figures['sewing_time']:g} s ({figures['sewing_steps']} steps), widest "
               f"stitch {1e3 * figures['stitch_gap']:.2f} mm")
-    return sim, 0
+    return sim, 0, figures["weld"]
 
 
-def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
-    """Steps 1..n_steps: each step's diagnostics row, a frame every ``every`` steps
-    and after the last; raises SimulationError as ``sim.step`` does (collective)."""
-    for k in range(1, n_steps + 1):
+def write_steps(sim, writer, n_steps: int, every: int, bar=None, after_step=None,
+                first: int = 0) -> int:
+    """Steps ``first``+1..n_steps of a phase that started at step
+    ``sim.state.step - first``: each step's diagnostics row, a frame every
+    ``every`` steps and after the last; ``after_step()`` (collective) may
+    stop the run by returning a signal number, which is returned (0: all
+    steps done).  Raises SimulationError as ``sim.step`` does (collective)."""
+    for k in range(first + 1, n_steps + 1):
         diag = sim.step()
         # the step's row first, so the frame's flush carries it; the output
         # stage's time is charged to the following step's row
@@ -121,7 +152,11 @@ def write_steps(sim, writer, n_steps: int, every: int, bar=None) -> None:
         if k % every == 0 or k == n_steps:
             _agreed_write(sim, writer, sim.pipeline.run, "output", writer)
         if bar:
-            bar.update(k, sim.state.t)
+            bar.update(k - first, sim.state.t)
+        stop = after_step() if after_step is not None else 0
+        if stop:
+            return stop
+    return 0
 
 
 def _agreed_write(sim, writer, write, *args) -> None:
@@ -138,24 +173,42 @@ def _agreed_write(sim, writer, write, *args) -> None:
         raise SimulationError(sim.state.step, agreed[1])
 
 
-def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only=False,
-        quiet=False, progress=True) -> int:
+def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=None,
+        check_only=False, quiet=False, progress=True) -> int:
+    """``distcloth run`` (and ``check``); ``resume``: a result file or
+    checkpoint to go on from (``--resume``)."""
     t_start = time.perf_counter()
-    sim, code = setup(cfg, comm, force=force, cmdline_options=cmdline_options, quiet=quiet)
+    restart = None
+    if resume is not None and not check_only:
+        restart, code = open_resume(cfg, comm, resume, output)
+        if code:
+            return code
+    sim, code = setup(cfg, comm, force=force, cmdline_options=cmdline_options, quiet=quiet,
+                      resume=restart)
     if code:
         return code
     if check_only:
         log(comm, "check: the scene is valid")
         sim.destroy()
         return 0
-    path = output or cfg.output.file
     h = cfg.time.step
-    sim, code = sew_if_needed(sim, cfg, comm, path, force=force, quiet=quiet,
-                              cmdline_options=cmdline_options, progress=progress)
-    if code:
-        return code
+    if restart is None:
+        path = output or cfg.output.file
+        sim, code, weld = sew_if_needed(sim, cfg, comm, path, force=force, quiet=quiet,
+                                        cmdline_options=cmdline_options, progress=progress)
+        if code:
+            return code
+        phase_start = sim.state.step
+    else:
+        path = restart.result
+        weld = None
+        if "weld_rows" in restart.arrays:
+            weld = (restart.arrays["weld_rows"], restart.scalars["weld_time"],
+                    restart.scalars["weld_step"])
+        phase_start = int(restart.scalars["phase_start_step"])
     # a sewn garment goes on from the time its sewing ended, to time.end
-    n_steps = max(0, max(1, int(round(cfg.time.end / h))) - sim.state.step)
+    n_steps = max(0, max(1, int(round(cfg.time.end / h))) - phase_start)
+    done = sim.state.step - phase_start
     every = max(1, int(round(cfg.output.every / h)))
     bounds = sim.contact.image_error_bounds()
     image = {f"image_error_bound/{name}": list(bound) for name, bound in bounds.items()}
@@ -166,23 +219,42 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
         if c.region is not None:
             log(comm, f"collider {c.name} in contact: {c.region}")
     writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
-                         {"steps": n_steps, "output_every_steps": every, **image},
-                         garment_arrays(sim.model))
-    log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
-    sim.pipeline.run("output", writer)
+                         {"steps": n_steps, "output_every_steps": every,
+                          "checkpoint": os.path.basename(checkpoint_path(path)), **image},
+                         garment_arrays(sim.model),
+                         resume_step=None if restart is None else sim.state.step)
+    if restart is None:
+        log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
+        sim.pipeline.run("output", writer)
+    else:
+        if restart.killed:
+            log(comm, restart.killed)
+        log(comm, f"resuming {os.path.abspath(path)} from {restart.checkpoint}: step {done} of "
+                  f"{n_steps} (t = {sim.state.t:g} s), {comm.size} ranks")
     sim.pipeline.take_step_counters()
-    bar = Progress(comm, n_steps, enabled=progress and not quiet)
-    status, code = "completed", 0
-    try:
-        write_steps(sim, writer, n_steps, every, bar)
-    except SimulationError as exc:
-        log(comm, f"stopped: {exc}")
-        writer.record_error(exc.step, str(exc))
-        status, code = "failed", 1
+    bar = Progress(comm, n_steps - done, enabled=progress and not quiet)
+    status, code, signum = "completed", 0, 0
+    with Interrupts(comm.rank) as interrupts:
+        checkpoints = Checkpoints(sim, cfg, comm, writer, path,
+                                  {"weld": weld, "phase_start_step": phase_start}, interrupts)
+        try:
+            signum = write_steps(sim, writer, n_steps, every, bar, checkpoints.after_step, done)
+            if not signum:
+                checkpoints.write()     # a finished run can be extended (a later time.end)
+        except SimulationError as exc:
+            log(comm, f"stopped: {exc}")
+            writer.record_error(exc.step, str(exc))
+            status, code = "failed", 1
+    if signum:
+        writer.record_interrupt(sim.state.step, signal_name(signum))
+        status, code = "interrupted", 128 + signum
     writer.close(status)
     wall = time.perf_counter() - t_start
     traversal = sim.contact.traversal_summary()      # collective
-    if not quiet:
+    if signum:
+        log(comm, f"interrupted by {signal_name(signum)} after step {sim.state.step} "
+                  f"(t = {sim.state.t:g} s): go on with --resume {os.path.abspath(path)}")
+    elif not quiet:
         log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
         if traversal:
             log(comm, traversal)
@@ -192,7 +264,7 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
                       f"{cfg.strain_limiting.passes}; limited_strain in the diagnostics)")
         log(comm, f"{status} in {wall:.2f} s: {os.path.abspath(path)} "
                   f"(+ {os.path.splitext(os.path.basename(path))[0]}.xdmf for ParaView)")
-    _previews(cfg, comm, path)
+    _previews(cfg, comm, path, quiet=bool(signum))
     sim.destroy()
     return code
 
@@ -200,14 +272,16 @@ def run(cfg, comm, *, output=None, force=False, cmdline_options=None, check_only
 def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     """``distcloth drape``: relax to the rest state (Volino and Magnenat-Thalmann
     2007); a frame every ``drape.frame_every`` iterations and the last; frame
-    'time' is the iteration."""
+    'time' is the iteration.  SIGTERM or SIGINT ends it after the iteration
+    (status 'interrupted'); a relaxation has no checkpoint: it starts again."""
     t_start = time.perf_counter()
     sim, code = setup(cfg, comm, cmdline_options=cmdline_options, quiet=quiet)
     if code:
         return code
     spec = cfg.drape
     path = output or cfg.output.file
-    sim, code = sew_if_needed(sim, cfg, comm, path, quiet=quiet, cmdline_options=cmdline_options)
+    sim, code, _ = sew_if_needed(sim, cfg, comm, path, quiet=quiet,
+                                 cmdline_options=cmdline_options)
     if code:
         return code
     writer = open_writer(sim, cfg, comm, path, list(DRAPE_DIAGNOSTICS),
@@ -220,28 +294,36 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     writer.write_frame(0, 0.0, sim.owned_positions(), body_time=sim.state.t,
                        fields=sim.frame_fields())
     bar = Progress(comm, spec.max_iterations, enabled=not quiet)
-    status, code, k = "completed", 0, 0
-    try:
-        for k in range(1, spec.max_iterations + 1):
-            diag = relax.iterate()
-            times, calls = sim.pipeline.take_step_counters()
-            writer.write_step(k, float(k), diag, times, calls)
-            done = drape_converged(diag, spec)
-            if done or k % spec.frame_every == 0 or k == spec.max_iterations:
-                writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t,
-                                   fields=sim.frame_fields())
-            bar.update(k, float(k))
-            if done:
-                break
-        else:
-            raise SimulationError(k, f"drape did not converge in {spec.max_iterations} iterations "
-                                     f"(residual {diag['residual']:.3g} > {spec.tolerance:g})")
-    except SimulationError as exc:
-        log(comm, f"stopped: {exc}")
-        writer.record_error(exc.step, str(exc))
-        status, code = "failed", 1
+    status, code, k, signum = "completed", 0, 0, 0
+    with Interrupts(comm.rank) as interrupts:
+        try:
+            for k in range(1, spec.max_iterations + 1):
+                diag = relax.iterate()
+                times, calls = sim.pipeline.take_step_counters()
+                writer.write_step(k, float(k), diag, times, calls)
+                done = drape_converged(diag, spec)
+                signum = int(comm.max(np.array([float(interrupts.pending(k))]))[0])
+                if done or signum or k % spec.frame_every == 0 or k == spec.max_iterations:
+                    writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t,
+                                       fields=sim.frame_fields())
+                bar.update(k, float(k))
+                if done or signum:
+                    break
+            else:
+                raise SimulationError(k, f"drape did not converge in {spec.max_iterations} "
+                                         f"iterations (residual {diag['residual']:.3g} > "
+                                         f"{spec.tolerance:g})")
+        except SimulationError as exc:
+            log(comm, f"stopped: {exc}")
+            writer.record_error(exc.step, str(exc))
+            status, code = "failed", 1
+    if signum:
+        writer.record_interrupt(k, signal_name(signum))
+        status, code = "interrupted", 128 + signum
+        log(comm, f"interrupted by {signal_name(signum)} after iteration {k}: a drape has no "
+                  f"checkpoint, run it again to finish")
     writer.close(status)
-    _previews(cfg, comm, path)
+    _previews(cfg, comm, path, quiet=bool(signum))
     if code == 0:
         log(comm, f"converged in {k} iterations ({relax.stops} stops), residual "
                   f"{diag['residual']:.3g}, {time.perf_counter() - t_start:.2f} s: {os.path.abspath(path)}")
@@ -249,12 +331,13 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     return code
 
 
-def _previews(cfg, comm, path):
+def _previews(cfg, comm, path, quiet=False):
     if cfg.output.preview and comm.rank == 0:
         try:
             # matplotlib takes a second to import: only runs that draw pay for it
             from .io.preview import write_previews
             for p in write_previews(path):
-                log(comm, f"preview: {os.path.abspath(p)}")
+                if not quiet:
+                    log(comm, f"preview: {os.path.abspath(p)}")
         except Exception as exc:   # a picture must never turn a finished run into a failure
             log(comm, f"preview failed: {exc}")

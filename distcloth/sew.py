@@ -70,8 +70,12 @@ def sew(sim: Simulation, cfg, comm, path: str, writer_factory, *, quiet=False,
         writer.close("failed")
         raise
     writer.close("completed")
-    figures = {"sewing_time": sim.state.t, "sewing_steps": sim.state.step, "stitch_gap": gap}
-    welded = weld(sim, cfg, comm, quiet=quiet, force=force, cmdline_options=cmdline_options)
+    rows = weld_rows(sim, comm)
+    # the weld's input: a checkpoint keeps it to rebuild the welded garment
+    figures = {"sewing_time": sim.state.t, "sewing_steps": sim.state.step, "stitch_gap": gap,
+               "weld": (rows, sim.state.t, sim.state.step)}
+    welded = weld(sim, cfg, comm, quiet=quiet, force=force, cmdline_options=cmdline_options,
+                  rows=rows)
     return welded, figures
 
 
@@ -90,39 +94,54 @@ def _per_vertex(cfg, model, value) -> np.ndarray:
     return model.per_vertex([float(value(spec.material)) for spec in cfg.cloth])
 
 
-def weld(sim: Simulation, cfg, comm, *, quiet=False, force=False,
-         cmdline_options=None) -> Simulation:
-    """The welded Simulation of a sewn ``sim`` (collective): one all-gather of
-    the state, the same new model built on every rank, partitioned again."""
-    model, lay = sim.model, sim.layout
+def weld_rows(sim: Simulation, comm) -> np.ndarray:
+    """(n, 6) positions and velocities of every pattern vertex, in input order,
+    on every rank (one all-gather): what the weld is made from."""
     n = sim.n_owned
-    rows = comm.allgather_rows(lay.owned_input, np.hstack([sim.state.x[:n], sim.state.v[:n]]),
-                               model.num_vertices)
+    return comm.allgather_rows(sim.layout.owned_input,
+                               np.hstack([sim.state.x[:n], sim.state.v[:n]]),
+                               sim.model.num_vertices)
+
+
+def welded_model(cfg, model, rows: np.ndarray):
+    """The welded model of the pattern ``model`` sewn to ``rows`` (weld_rows);
+    ValueError if the weld fails (the same on every rank)."""
     seams = cfg.garment.seams
     material = SeamMaterial(seams.stretch, seams.width, seams.bending, seams.shrinkage)
+    return weld_model(model, rows[:, :3], rows[:, 3:], material,
+                      _per_vertex(cfg, model, lambda m: m.orthotropic()[0]
+                                  if m.model == "fem" else m.stretch),
+                      _per_vertex(cfg, model, lambda m: m.bending),
+                      _per_vertex(cfg, model, lambda m: m.damping))
+
+
+def weld(sim: Simulation, cfg, comm, *, quiet=False, force=False,
+         cmdline_options=None, rows=None) -> Simulation:
+    """The welded Simulation of a sewn ``sim`` (collective): one all-gather of
+    the state (unless ``rows`` has it), the same new model built on every
+    rank, partitioned again."""
+    model = sim.model
+    if rows is None:
+        rows = weld_rows(sim, comm)
     t, step = sim.state.t, sim.state.step
-    error, welded_model = None, None
+    error, new_model = None, None
     try:
-        welded_model = weld_model(model, rows[:, :3], rows[:, 3:], material,
-                                  _per_vertex(cfg, model, lambda m: m.orthotropic()[0]
-                                              if m.model == "fem" else m.stretch),
-                                  _per_vertex(cfg, model, lambda m: m.bending),
-                                  _per_vertex(cfg, model, lambda m: m.damping))
+        new_model = welded_model(cfg, model, rows)
     except ValueError as exc:       # the same on every rank: the model is replicated
         error = f"welding the sewn garment failed: {exc}"
     sim.destroy()
     if error is not None:
         raise SimulationError(step, error)
     try:
-        welded = Simulation(cfg, welded_model, comm, quiet=quiet, force_explicit=force,
+        welded = Simulation(cfg, new_model, comm, quiet=quiet, force_explicit=force,
                             cmdline_options=cmdline_options)
         welded.prepare()
     except ConfigError as exc:
         raise SimulationError(step, f"the welded garment cannot be simulated: {exc}") from None
     welded.state.t, welded.state.step = t, step
     log(comm, f"welded at t = {t:g} s: {model.num_vertices} pattern vertices -> "
-              f"{welded_model.num_vertices} ({welded_model.triangles.shape[0]} triangles, "
-              f"{welded_model.seam_lines.shape[0]} seam edges)")
+              f"{new_model.num_vertices} ({new_model.triangles.shape[0]} triangles, "
+              f"{new_model.seam_lines.shape[0]} seam edges)")
     return welded
 
 

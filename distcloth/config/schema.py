@@ -583,6 +583,18 @@ class StealSpec:
 
 
 @dataclass(frozen=True)
+class CheckpointSpec:
+    """When a run writes its checkpoint (`<output stem>.checkpoint.h5`, read by
+    `distcloth run --resume`); a run also writes one when it ends or is
+    interrupted (SIGTERM, SIGINT)."""
+    every_steps: int | None = setting(None, doc="write one every this many steps; null: not "
+                                      "by steps", at_least=1)
+    every_seconds: float | None = setting(600.0, doc="write one when this much wall time has "
+                                          "passed since the last; null: not by time", unit="s",
+                                          above=0)
+
+
+@dataclass(frozen=True)
 class OutputSpec:
     """The result file and its frames."""
     file: str = setting("out/result.h5", doc="HDF5 result, relative to the current directory; "
@@ -590,6 +602,8 @@ class OutputSpec:
     every: float = setting(0.1, doc="time between frames, >= time.step (rounded to a whole "
                            "number of steps)", unit="s", above=0)
     preview: bool = setting(True, doc="PNG pictures and plots beside the HDF5 file")
+    checkpoint: CheckpointSpec = section(CheckpointSpec, doc="checkpoints for restarting "
+                                         "an interrupted run")
 
 
 @dataclass(frozen=True)

@@ -34,9 +34,17 @@ Layout (every array in *input* vertex order, whatever the partition)::
     /garment/seam_lines        (m, 2) int64: its welded seam edges
     /colliders/<name> attributes: name (the scene's; '/' in it becomes '_' in
     the group name), shape (plane | sphere | capsule | box | mesh), moving
-    root attributes: status ('running' | 'completed' | 'failed'), error,
-    error_step, frames_written, steps_written, format, format_version, plus
-    the caller's ``attrs``.
+    root attributes: status ('running' | 'completed' | 'interrupted' |
+    'failed'), error, error_step, interrupted_step, interrupted_by (a signal
+    name), heartbeat (seconds since the epoch of the last frame or flush:
+    a 'running' file whose heartbeat stopped belongs to a killed run),
+    resumed_at (steps the run was resumed from), frames_written,
+    steps_written, format, format_version, plus the caller's ``attrs``.
+
+Resuming (``resume_step``): the existing file is opened, every frame after
+that step and every diagnostics row after it is cut off (a run killed after
+its last checkpoint leaves some), the caller's ``attrs`` replace the stored
+ones, and the run goes on appending.
 
 Format versions: 1 had no /colliders; 2 adds it (a scene without colliders
 has no /colliders group); 3 adds the per-frame fields and the /xdmf views.
@@ -76,6 +84,7 @@ deadlock against ranks that did not raise.
 from __future__ import annotations
 
 import os
+import time as _time
 import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
@@ -106,7 +115,8 @@ DEFAULT_STEP_BUFFER = 1024
 
 _RESERVED_ATTRS = frozenset(
     {"status", "error", "error_step", "frames_written", "steps_written",
-     "format", "format_version"})
+     "format", "format_version", "interrupted_step", "interrupted_by", "heartbeat",
+     "resumed_at"})
 _RESERVED_DIAGNOSTICS = frozenset({"step", "time", "stage_time", "stage_calls"})
 _RESERVED_FIELDS = frozenset({"positions", "time", "step", "position", "rank"})
 # XDMF NumberType and Precision of the dtypes a field may have
@@ -283,7 +293,7 @@ class ResultWriter:
                  stage_names: Sequence[str], diagnostic_names: Sequence[str],
                  colliders: Sequence[Any] = (), step_buffer: int = DEFAULT_STEP_BUFFER,
                  arrays: Mapping[str, np.ndarray] | None = None,
-                 fields: Sequence[FrameField] = ()):
+                 fields: Sequence[FrameField] = (), resume_step: int | None = None):
         self.path = os.path.abspath(os.fspath(path))
         self._comm = _SerialComm() if comm is None else comm
         self.rank, self.size = int(self._comm.rank), int(self._comm.size)
@@ -375,10 +385,14 @@ class ResultWriter:
         if self.rank == 0:
             os.makedirs(parent, exist_ok=True)
         self._comm.synchronize()   # the directory exists before anyone opens
+        mode = "w" if resume_step is None else "r+"
         if self._mpio:
-            self._file = h5py.File(self.path, "w", driver="mpio", comm=self._comm.mpi_comm)
+            self._file = h5py.File(self.path, mode, driver="mpio", comm=self._comm.mpi_comm)
         else:
-            self._file = h5py.File(self.path, "w")
+            self._file = h5py.File(self.path, mode)
+        if resume_step is not None:
+            self._reopen(int(resume_step), attrs, part, colliders, bodies, step_buffer, config_text)
+            return
         f = self._file
 
         f.attrs["format"] = FORMAT_NAME
@@ -390,6 +404,8 @@ class ResultWriter:
         f.attrs["error_step"] = np.int64(-1)
         f.attrs["frames_written"] = np.int64(0)
         f.attrs["steps_written"] = np.int64(0)
+        f.attrs["resumed_at"] = np.zeros(0, dtype=np.int64)
+        self._beat()
 
         # Static arrays: identical on all ranks, so rank 0 writes them all.
         tri_ds = f.create_dataset("mesh/triangles", shape=triangles.shape, dtype=np.int64)
@@ -405,10 +421,7 @@ class ResultWriter:
             ds = f.create_dataset(name, shape=value.shape, dtype=value.dtype)
             if value.size:
                 self._write_root(ds, value)
-        text = config_text.encode("utf-8")
-        # Fixed-length string: parallel HDF5 1.10 cannot write variable-length data.
-        cfg = f.create_dataset("config", shape=(), dtype=h5py.string_dtype("utf-8", max(1, len(text))))
-        self._write_root(cfg, np.array(text, dtype=f"S{max(1, len(text))}"), mtype=cfg.id.get_type())
+        self._write_config(config_text)
 
         chunk_v = min(n, FRAME_CHUNK_VERTICES)
         self._positions = f.create_dataset(
@@ -426,25 +439,7 @@ class ResultWriter:
                 f"frames/{fld.name}", shape=(0, rows) + row, maxshape=(None, rows) + row,
                 chunks=(1, max(1, min(rows, FRAME_CHUNK_VERTICES))) + row, dtype=fld.dtype)
 
-        # Per-step tables: name -> (dataset, in-memory buffer column).
-        self._buf_len = max(1, int(step_buffer))
-        chunk_s = (min(self._buf_len, 1024),)
-        self._step_tables: list[tuple[h5py.Dataset, np.ndarray]] = []
-
-        def table(name, dtype, fill):
-            ds = f.create_dataset(name, shape=(0,), maxshape=(None,), chunks=chunk_s, dtype=dtype)
-            buf = np.full(self._buf_len, fill, dtype=dtype)
-            self._step_tables.append((ds, buf))
-            return buf
-
-        self._b_step = table("diagnostics/step", np.int64, -1)
-        self._b_time = table("diagnostics/time", np.float64, np.nan)
-        self._b_diag = {k: table(f"diagnostics/{k}", np.float64, np.nan) for k in self.diagnostic_names}
-        self._b_stime = {k: table(f"diagnostics/stage_time/{k}", np.float64, np.nan) for k in self.stage_names}
-        self._b_scalls = {k: table(f"diagnostics/stage_calls/{k}", np.int64, 0) for k in self.stage_names}
-        f.require_group("diagnostics/stage_time")
-        f.require_group("diagnostics/stage_calls")
-        self._n_buffered = 0
+        self._step_tables_open(step_buffer, create=True)
 
         # Collider surfaces: triangles once; positions once for a body that
         # never moves, else a row per frame (write_frame).
@@ -468,6 +463,105 @@ class ResultWriter:
                 self._make_view(ds, 0)
             self._xdmf_bodies.append(XdmfBody(name, f"/colliders/{group}", nv, m, moving))
         f.flush()
+
+    def _step_tables_open(self, step_buffer: int, create: bool) -> None:
+        """The per-step tables: name -> (dataset, in-memory buffer column)."""
+        f = self._file
+        self._buf_len = max(1, int(step_buffer))
+        chunk_s = (min(self._buf_len, 1024),)
+        self._step_tables: list[tuple[h5py.Dataset, np.ndarray]] = []
+
+        def table(name, dtype, fill):
+            if create:
+                ds = f.create_dataset(name, shape=(0,), maxshape=(None,), chunks=chunk_s,
+                                      dtype=dtype)
+            else:
+                ds = f[name]
+            buf = np.full(self._buf_len, fill, dtype=dtype)
+            self._step_tables.append((ds, buf))
+            return buf
+
+        self._b_step = table("diagnostics/step", np.int64, -1)
+        self._b_time = table("diagnostics/time", np.float64, np.nan)
+        self._b_diag = {k: table(f"diagnostics/{k}", np.float64, np.nan) for k in self.diagnostic_names}
+        self._b_stime = {k: table(f"diagnostics/stage_time/{k}", np.float64, np.nan) for k in self.stage_names}
+        self._b_scalls = {k: table(f"diagnostics/stage_calls/{k}", np.int64, 0) for k in self.stage_names}
+        f.require_group("diagnostics/stage_time")
+        f.require_group("diagnostics/stage_calls")
+        self._n_buffered = 0
+
+    def _reopen(self, step: int, attrs, part, colliders, bodies, step_buffer,
+                config_text: str) -> None:
+        """Go on writing an existing result after ``step``: later frames and
+        diagnostics rows are cut off (collective: every rank reads the same
+        file and resizes alike)."""
+        f = self._file
+        if f.attrs.get("format") != FORMAT_NAME or "frames/positions" not in f:
+            raise ValueError(f"{self.path} is not a distcloth result file")
+        if f["frames/positions"].shape[1] != self.n_vertices:
+            raise ValueError(f"{self.path} has {f['frames/positions'].shape[1]} vertices, the "
+                             f"resumed run {self.n_vertices}")
+        missing = [k for k in self.diagnostic_names if f"diagnostics/{k}" not in f]
+        if missing:
+            raise ValueError(f"{self.path} has no diagnostics {missing}")
+        nf = min(int(f.attrs.get("frames_written", 0)), f["frames/step"].shape[0])
+        ns = min(int(f.attrs.get("steps_written", 0)), f["diagnostics/step"].shape[0])
+        keep_f = int(np.searchsorted(f["frames/step"][:nf], step, side="right"))
+        steps = f["diagnostics/step"][:ns]
+        keep_s = int(np.searchsorted(steps, step, side="right"))
+        if keep_s and steps[keep_s - 1] != step:
+            raise ValueError(f"{self.path} lacks the diagnostics of steps {int(steps[keep_s - 1]) + 1}"
+                             f" to {step}: it does not belong to this checkpoint")
+
+        def cut(name, obj):
+            if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None:
+                obj.resize(keep_s if name.startswith("diagnostics/") else keep_f, axis=0)
+
+        f.visititems(cut)
+        for key, value in attrs.items():
+            f.attrs[key] = value
+        self._write_root(f["partition/part"], np.ascontiguousarray(part, dtype=np.int32))
+        del f["config"]        # the resumed run's (time.end may have grown)
+        self._write_config(config_text)
+        f["partition"].attrs["ranks"] = np.int64(self.size)
+        resumed = [int(s) for s in np.atleast_1d(f.attrs.get("resumed_at", np.zeros(0, np.int64)))]
+        f.attrs["resumed_at"] = np.array(resumed + [step], dtype=np.int64)
+        f.attrs["status"] = "running"
+        f.attrs["error"] = ""
+        f.attrs["error_step"] = np.int64(-1)
+        for key in ("interrupted_step", "interrupted_by"):
+            if key in f.attrs:
+                del f.attrs[key]
+        self._positions = f["frames/positions"]
+        self._frame_time = f["frames/time"]
+        self._frame_step = f["frames/step"]
+        self._times = [float(t) for t in self._frame_time[:keep_f]]
+        self.frames_written, self.steps_written = keep_f, keep_s
+        f.attrs["frames_written"] = np.int64(keep_f)
+        f.attrs["steps_written"] = np.int64(keep_s)
+        self._step_tables_open(step_buffer, create=False)
+        self._moving, self._xdmf_bodies = [], []
+        for c, (name, shape, moving, nv, m), group in zip(
+                colliders, bodies, _group_names([b[0] for b in bodies])):
+            if f"colliders/{group}" not in f:
+                raise ValueError(f"{self.path} has no collider {name!r}")
+            if moving:
+                self._moving.append((c, f[f"colliders/{group}/positions"]))
+            self._xdmf_bodies.append(XdmfBody(name, f"/colliders/{group}", nv, m, moving))
+        self._beat()
+        f.flush()
+        self._write_xdmf()
+
+    def _write_config(self, config_text: str) -> None:
+        text = config_text.encode("utf-8")
+        # Fixed-length string: parallel HDF5 1.10 cannot write variable-length data.
+        cfg = self._file.create_dataset("config", shape=(),
+                                        dtype=h5py.string_dtype("utf-8", max(1, len(text))))
+        self._write_root(cfg, np.array(text, dtype=f"S{max(1, len(text))}"), mtype=cfg.id.get_type())
+
+    def _beat(self) -> None:
+        """The heartbeat attribute: rank 0's clock (attributes must be equal everywhere)."""
+        self._file.attrs["heartbeat"] = float(self._comm.broadcast(_time.time(), root=0))
 
     # ------------------------------------------------------------ low level
 
@@ -620,6 +714,7 @@ class ResultWriter:
         self.frames_written = k + 1
         self._times.append(float(time))
         self._file.attrs["frames_written"] = np.int64(self.frames_written)
+        self._beat()
         self._file.flush()
         self._write_xdmf()
 
@@ -668,6 +763,22 @@ class ResultWriter:
         f.flush()
         self._write_xdmf()
 
+    def flush(self) -> None:
+        """Collective: write the buffered steps and flush the file (before a
+        checkpoint, so the file holds every step up to it)."""
+        self._require_open()
+        self._flush_steps()
+        self._beat()
+        self._file.flush()
+
+    def record_interrupt(self, step: int, signal_name: str) -> None:
+        """Collective: the run stopped on a signal after ``step``; close then
+        sets status 'interrupted' (rank 0's arguments are used)."""
+        self._require_open()
+        step, signal_name = self._comm.broadcast((int(step), str(signal_name)), root=0)
+        self._file.attrs["interrupted_step"] = np.int64(step)
+        self._file.attrs["interrupted_by"] = signal_name
+
     def close(self, status: str = "completed") -> None:
         """Collective: write the remaining steps, set the final status, close.
 
@@ -677,6 +788,7 @@ class ResultWriter:
         if self._closed:
             return
         self._flush_steps()
+        self._beat()
         self._file.attrs["status"] = "failed" if self._error_recorded else str(status)
         self._file.attrs["frames_written"] = np.int64(self.frames_written)
         self._file.attrs["steps_written"] = np.int64(self.steps_written)
