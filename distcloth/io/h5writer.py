@@ -518,6 +518,18 @@ class ResultWriter:
                 obj.resize(keep_s if name.startswith("diagnostics/") else keep_f, axis=0)
 
         f.visititems(cut)
+        missing = [fld.name for fld in self.fields if f"frames/{fld.name}" not in f]
+        if missing:
+            raise ValueError(f"{self.path} has no per-frame fields {missing} (an older format)")
+        self._field_ds = {fld.name: f[f"frames/{fld.name}"] for fld in self.fields}
+        # the per-frame views of the frames cut off go too: they are made again
+        views = [ds.name for ds in [f["frames/positions"], *self._field_ds.values()]]
+        views += [f"/colliders/{g}/positions" for g in f.get("colliders", {})
+                  if f[f"colliders/{g}/positions"].maxshape[0] is None]
+        for name in views:
+            group = f.get(frame_view(name, 0).rsplit("/", 1)[0])
+            for key in [] if group is None else [key for key in group if int(key) >= keep_f]:
+                del group[key]
         for key, value in attrs.items():
             f.attrs[key] = value
         self._write_root(f["partition/part"], np.ascontiguousarray(part, dtype=np.int32))
