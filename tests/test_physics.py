@@ -222,7 +222,7 @@ def test_explicit_stability_limit():
         # the energy guard off: near h = 2/omega symplectic Euler's true energy
         # oscillates by up to 1/(1 - h omega/2) of its conserved shadow energy,
         # far above the guard's 0.1 S, while bounded; this test is about the bound
-        sim = make_sim(dict(raw, time={"end": 100.0, "step": h, "integrator": "symplectic_euler",
+        sim = make_sim(dict(raw, time={"end": h * steps, "step": h, "integrator": "symplectic_euler",
                                        "energy_guard": False}), model, force=True)
         try:
             speeds = [sim.step()["max_speed"] for _ in range(steps)]
