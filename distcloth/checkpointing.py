@@ -6,7 +6,6 @@ io/checkpoint.py's."""
 from __future__ import annotations
 
 import os
-import sys
 import time
 from dataclasses import dataclass
 
@@ -16,7 +15,7 @@ from .config import format_config_error
 from .config.compare import check_resumable
 from .config.schema import ConfigError
 from .io.checkpoint import checkpoint_path, is_checkpoint, read_checkpoint, write_checkpoint
-from .io.console import log
+from .io.console import log, shared_or_refused
 from .io.h5read import read_attrs
 from .io.h5writer import FORMAT_NAME
 from .io.liveness import ALIVE, judge
@@ -42,12 +41,7 @@ def open_resume(cfg, comm, target: str, output: str | None):
             resume = _read_resume(cfg, target, output)
         except ConfigError as exc:
             message = format_config_error(exc)
-    resume, message = comm.broadcast((resume, message))
-    if message is not None:
-        if comm.rank == 0:
-            print(message, file=sys.stderr, flush=True)
-        return None, 2
-    return resume, 0
+    return shared_or_refused(comm, resume, message)
 
 
 def _read_resume(cfg, target: str, output: str | None) -> Resume:

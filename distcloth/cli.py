@@ -20,6 +20,7 @@ import traceback
 
 from .config import ConfigError, format_config_error, load_config
 from .config.load import command_line_key, own_option_names
+from .io.console import shared_or_refused
 from .io.output_path import check_output_path
 from .io.commands import COMMANDS as RESULT_COMMANDS, add_result_parsers, run_result_command
 from .linalg.petsc import command_line_options, init_petsc, take_options
@@ -183,11 +184,9 @@ def _main(args, comm, cmdline_options, own_options=None) -> int:
                                   replace=args.overwrite)
         except ConfigError as exc:
             message = format_config_error(exc)
-    cfg, message = comm.broadcast((cfg, message))
-    if message is not None:
-        if comm.rank == 0:
-            print(message, file=sys.stderr, flush=True)
-        return 2
+    cfg, code = shared_or_refused(comm, cfg, message)
+    if code:
+        return code
     if args.command == "check":
         return run(cfg, comm, output=args.output, cmdline_options=cmdline_options,
                    check_only=True)

@@ -16,6 +16,19 @@ def log(comm, msg: str) -> None:
         print(f"[distcloth] {msg}", file=sys.stderr, flush=True)
 
 
+def shared_or_refused(comm, value, message: str | None):
+    """Rank 0's ``(value, message)`` on every rank: ``(value, 0)``, or, when
+    rank 0 met a config error (``message``), ``(None, 2)`` with the message
+    printed once."""
+    value, message = comm.broadcast((value, message))
+    if message is not None:
+        if comm.rank == 0:
+            _end_open_line()
+            print(message, file=sys.stderr, flush=True)
+        return None, 2
+    return value, 0
+
+
 def _end_open_line() -> None:
     stream = _open_line[0]
     if stream is not None:
