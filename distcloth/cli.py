@@ -27,6 +27,8 @@ from .linalg.petsc import command_line_options, init_petsc, take_options
 from .parallel.comm import Comm
 from .run import drape, run
 from .sew import sewing_path
+from .lab.command import add_arguments as add_lab_arguments
+from .lab.command import main as run_lab
 from .study import add_study_parsers, run_study
 
 
@@ -105,6 +107,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_study_parsers(sub.add_parser("study", help="studies of the simulator (accuracy "
                                                    "against time, stability suite)",
                                      allow_abbrev=False))
+    lab = sub.add_parser("lab", help="the standard fabric tests (Peirce cantilever, Cusick "
+                                     "drape, ...) on a preset or a scene's material",
+                         allow_abbrev=False)
+    add_lab_arguments(lab)
     add_result_parsers(sub)
     return p
 
@@ -158,14 +164,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args, comm, cmdline_options, own_options=None) -> int:
-    if args.command == "study":          # no scene: the study builds its own
+    if args.command in ("study", "lab"):     # no scene: it builds its own
         for name, value in (own_options or {}).items():
             if comm.rank == 0:
                 print(format_config_error(ConfigError(
                     command_line_key(name), value, "a scene setting, given to a study as "
-                    f"--set linear_system.{name}={value}")), file=sys.stderr, flush=True)
+                    f"--set linear_system.{name}={value}" if args.command == "study" else
+                    "a scene setting, not an option of distcloth lab")),
+                    file=sys.stderr, flush=True)
             return 2
-        return run_study(args, comm)
+        return run_study(args, comm) if args.command == "study" else run_lab(args, comm)
     cfg, message = None, None
     if comm.rank == 0:
         try:

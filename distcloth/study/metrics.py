@@ -244,20 +244,32 @@ def shadow_area(x: np.ndarray, triangles: np.ndarray, cell: float, up=(0.0, 0.0,
     """Area (m²) of the union of the triangles projected along ``up`` onto the
     ground plane, counted on a grid of square cells of side ``cell`` anchored at
     the shadow's lower corner (cell centres at lo + (i + 1/2) cell)."""
-    tri = np.asarray(triangles, np.int64)
     p = (np.asarray(x, float) @ ground_basis(up)[:2].T)              # (n, 2) ground coordinates
-    q = p[tri]                                                      # (t, 3, 2)
+    if len(p) == 0:
+        return 0.0
+    lo = p.min(axis=0)
+    shape = np.maximum(np.ceil((p.max(axis=0) - lo) / cell).astype(np.int64), 1)
+    return float(shadow_cells(p, triangles, cell, lo, shape).sum()) * cell * cell
+
+
+def shadow_cells(p: np.ndarray, triangles: np.ndarray, cell: float, lo, shape) -> np.ndarray:
+    """Boolean grid ``shape`` of the cells (side ``cell``, centres at lo + (i + 1/2)
+    cell) whose centres lie under a triangle of the ground-plane points ``p`` (n, 2);
+    a fixed grid lets several parts of a mesh be rasterised apart and OR-ed."""
+    tri = np.asarray(triangles, np.int64)
+    covered = np.zeros(tuple(int(k) for k in shape), bool)
+    if len(tri) == 0:
+        return covered
+    q = np.asarray(p, float)[tri]                                   # (t, 3, 2)
     e1, e2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
     twice = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     q = q[np.abs(twice) > 1e-14 * cell * cell]                       # edge-on triangles cast no area
     if len(q) == 0:
-        return 0.0
-    lo = p.min(axis=0)
-    shape = np.maximum(np.ceil((p.max(axis=0) - lo) / cell).astype(np.int64), 1)
+        return covered
+    lo = np.asarray(lo, float)
     # candidate cells per triangle: the centres inside its bounding box
     first = np.ceil((q.min(axis=1) - lo) / cell - 0.5).astype(np.int64)     # (t, 2)
     span = np.maximum(np.floor((q.max(axis=1) - lo) / cell - 0.5).astype(np.int64) - first + 1, 1)
-    covered = np.zeros(shape, bool)
     # triangles binned by their box's size in powers of two along each axis, so that a
     # long sliver (a hull edge of a Delaunay mesh, a cloth seen edge-on) costs its own box,
     # not every triangle's; vectorised within a bin, in batches that bound the memory
@@ -270,7 +282,7 @@ def shadow_area(x: np.ndarray, triangles: np.ndarray, cell: float, up=(0.0, 0.0,
         per = max(1, SHADOW_BATCH // len(off))
         for s in range(0, len(sel), per):
             _mark_cells(covered, q[sel[s:s + per]], first[sel[s:s + per]], off, lo, cell)
-    return float(covered.sum()) * cell * cell
+    return covered
 
 
 def _mark_cells(covered, q, first, off, lo, cell) -> None:

@@ -17,10 +17,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
-from ..config import format_config_error
 from ..config.load import config_from_dict
-from ..config.schema import ConfigError
 from ..energy_guard import gravity_scale
+from ..inprocess import agreed, build_simulation
 from ..scene import build_model
 from ..simulation import Simulation, SimulationError
 from .cases import CASE_NAMES, CASES, get_case, steps_of
@@ -80,38 +79,9 @@ def _config(raw, name):
     return config_from_dict(raw, ".", name)
 
 
-def _agreed(comm, fn):
-    """fn() on every rank; (value, None) or (None, agreed config-error message)."""
-    value, err = None, None
-    try:
-        value = fn()
-    except ConfigError as exc:
-        err = format_config_error(exc)
-    agreed = comm.agree(err)
-    return (None, agreed[1]) if agreed is not None else (value, None)
-
-
 def _build(raw, case, comm, force=False):
     """(sim, note, None) or (None, note, refusal message); collective."""
-    cfg, err = _agreed(comm, lambda: _config(raw, case.name))
-    if err:
-        return None, "", err
-    model, err = _agreed(comm, lambda: build_model(cfg))
-    if err:
-        return None, "", err
-    note = (case.hook(model) if case.hook else None) or ""
-    holder = {}
-
-    def make():
-        holder["sim"] = Simulation(cfg, model, comm, quiet=True, force_explicit=force)
-        holder["sim"].prepare()
-        return holder["sim"]
-    sim, err = _agreed(comm, make)
-    if err:
-        if "sim" in holder:
-            holder["sim"].destroy()
-        return None, note, err
-    return sim, note, None
+    return build_simulation(raw, case.name, comm, force=force, hook=case.hook)
 
 
 def _explicit_step(case, raw, comm, fraction):
@@ -119,10 +89,10 @@ def _explicit_step(case, raw, comm, fraction):
     collective. The limit comes from a Simulation that is never prepared (so
     never refused at start-up); the case's hook does not change it (the
     Gershgorin bound is taken at the rest shape)."""
-    cfg, err = _agreed(comm, lambda: _config(raw, case.name))
+    cfg, err = agreed(comm, lambda: _config(raw, case.name))
     if err:
         return None, err
-    sim, err = _agreed(comm, lambda: Simulation(cfg, build_model(cfg), comm, quiet=True))
+    sim, err = agreed(comm, lambda: Simulation(cfg, build_model(cfg), comm, quiet=True))
     if err:
         return None, err
     limit, _ = sim.explicit_step_limits()
