@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-G = 9.80665          # gf -> N
+from .units import G_STANDARD as G
+from .units import GF_CM2_PER_CM, GF_CM_PER_CM2
 
 
 def _fmt(x: float, spec: str) -> str:
@@ -49,7 +50,49 @@ def cusick_section(r) -> str:
         f"{r.wall:.1f} s.", ""])
 
 
-SECTIONS = {"peirce": peirce_section, "cusick": cusick_section}
+def tensile_section(results) -> str:
+    out = ["### KES-FB1 tensile (20 cm × 5 cm, to 500 gf/cm)", "",
+           "| direction | EMT (%) | EMT, material law: uniaxial … plane strain (%) | "
+           "LT | WT (gf·cm/cm²) |", "|---|---:|---:|---:|---:|"]
+    notes = []
+    for r in results:
+        lo, hi = r.law_emt
+        out.append(f"| {r.direction} | {_fmt(100 * r.emt, '.3f')} | {_fmt(100 * lo, '.3f')} … "
+                   f"{_fmt(100 * hi, '.3f')} | {_fmt(r.lt, '.3f')} | "
+                   f"{_fmt(r.wt / GF_CM_PER_CM2, '.3f')} |")
+        notes.append(f"{r.direction}: {len(r.strain) - 1} increments, {r.wall:.1f} s"
+                     + (f" ({r.reason})" if r.reason else ""))
+    return "\n".join(out + ["", "; ".join(notes) + ".", ""])
+
+
+def shear_section(r) -> str:
+    from .kes_shear import kawabata_g
+    if r.reason and math.isnan(r.g):
+        return f"### KES-FB1 shear\n\nnot measured: {r.reason}\n"
+    return "\n".join([
+        "### KES-FB1 shear (20 cm × 5 cm, to 8°)", "",
+        "| quantity | simulated | material law |", "|---|---:|---:|",
+        f"| G (gf/cm/°) | {_fmt(kawabata_g(r.g), '.4f')} | {_fmt(kawabata_g(r.g_law), '.4f')} |",
+        f"| G (N/m) | {_fmt(r.g, '.2f')} | {_fmt(r.g_law, '.2f')} |", "",
+        f"{len(r.angle)} increments, {r.wall:.1f} s" + (f" ({r.reason})" if r.reason else "")
+        + ".", ""])
+
+
+def bending_section(r) -> str:
+    if r.reason and math.isnan(r.b):
+        return f"### KES-FB2 pure bending\n\nnot measured: {r.reason}\n"
+    return "\n".join([
+        "### KES-FB2 pure bending (jaws 1 cm apart, to 2.5 /cm)", "",
+        "| quantity | simulated | material law |", "|---|---:|---:|",
+        f"| B (gf·cm²/cm) | {_fmt(r.b / GF_CM2_PER_CM, '.4f')} | "
+        f"{_fmt(r.b_law / GF_CM2_PER_CM, '.4f')} |",
+        f"| B (µN·m) | {_fmt(1e6 * r.b, '.3f')} | {_fmt(1e6 * r.b_law, '.3f')} |", "",
+        f"{len(r.curvature) - 1} increments, {r.wall:.1f} s"
+        + (f" ({r.reason})" if r.reason else "") + ".", ""])
+
+
+SECTIONS = {"tensile": tensile_section, "shear": shear_section, "bending": bending_section,
+            "peirce": peirce_section, "cusick": cusick_section}
 
 
 def cusick_picture(r, path: str) -> None:
