@@ -19,6 +19,9 @@ def add_arguments(p) -> None:
                    help="a fabric preset name, or a scene file whose piece gives the material")
     p.add_argument("--piece", default=None, help="with a scene: the piece whose material is "
                                                  "tested (default: the first)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a key of the material, e.g. bending_model=dihedral_shell "
+                        "(checked like a scene's)")
     p.add_argument("--tests", nargs="+", default=list(TESTS), choices=list(TESTS),
                    metavar="TEST", help="tests to run (default: all): " + " ".join(TESTS))
     p.add_argument("--resolution", default="standard", choices=RESOLUTIONS,
@@ -41,7 +44,7 @@ def main(args, comm) -> int:
         try:
             if args.output is not None and not args.output.endswith(".md"):
                 raise ConfigError("--output", args.output, "a file name ending in .md")
-            material = lab_material(args.material, args.piece)
+            material = lab_material(args.material, args.piece, args.overrides)
         except ConfigError as exc:
             message = format_config_error(exc)
     material, code = shared_or_refused(comm, material, message)

@@ -4,6 +4,8 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
+import yaml
+
 from ..config.fabrics import FABRICS
 from ..config.load import load_config, read_scene_file
 from ..config.schema import ConfigError
@@ -16,9 +18,25 @@ class LabMaterial:
     base_dir: str       # where its relative paths (tension curves) are read from
 
 
-def lab_material(what: str, piece: str | None = None) -> LabMaterial:
+def lab_material(what: str, piece: str | None = None, overrides=()) -> LabMaterial:
     """A preset name, or a scene file whose piece ``piece`` (default: the first)
-    gives the material; the scene is checked whole first (ConfigError)."""
+    gives the material; the scene is checked whole first (ConfigError).
+    ``overrides``: material ``key=value`` texts (YAML values) applied after."""
+    found = _material(what, piece)
+    raw = dict(found.raw)
+    for text in overrides:
+        key, sep, value = text.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("--set", text, "key=value, a key of the material")
+        try:
+            raw[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            raise ConfigError("--set " + key.strip(), value, "a YAML value") from None
+    label = found.label + "".join(f", {t}" for t in overrides)
+    return LabMaterial(label, raw, found.base_dir)
+
+
+def _material(what: str, piece: str | None) -> LabMaterial:
     if what in FABRICS:
         return LabMaterial(f"preset {what}", {"preset": what}, os.getcwd())
     if not os.path.isfile(what):
