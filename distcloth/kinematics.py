@@ -21,8 +21,9 @@ class HeldVertices:
                       else np.full(self.rows.size, -1, dtype=np.int64))
         self.X = model.start_positions()[inputs]
         self.mass = mass[self.rows]
-        self.moving = np.array([g >= 0 and self.grips[g].path is not None for g in self.group],
-                               dtype=bool)
+        # per grip, then per row (index -1, a row of no grip, takes the last entry: False)
+        has_path = np.array([g.path is not None for g in self.grips] + [False], dtype=bool)
+        self.moving = has_path[self.group]
         self.owned = self.rows < self.n_owned
 
     @property

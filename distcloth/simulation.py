@@ -401,8 +401,8 @@ class Simulation:
     def diagnostic_names(self) -> list[str]:
         """The names of the diagnostics a step reports: DIAGNOSTICS, then each
         pin group's reaction components when the run records them."""
-        return list(DIAGNOSTICS) + [name for g in range(len(self.held.grips) * self.record_reactions)
-                                    for name in reaction_names(g)]
+        groups = range(len(self.held.grips)) if self.record_reactions else range(0)
+        return list(DIAGNOSTICS) + [name for g in groups for name in reaction_names(g)]
 
     def _reactions(self) -> dict:
         """Each pin group's reaction (N) at the committed state (collective):

@@ -689,7 +689,8 @@ class SceneConfig:
     effects: tuple[str, ...] = choice(("gravity", "membrane", "bending"), EFFECTS,
                                       doc="the forces and stages: collisions needs at least "
                                       "one collider; self_collision uses each piece's "
-                                      "thickness", what="effect names")
+                                      "thickness; loads needs at least one cloth.<i>.loads "
+                                      "entry", what="effect names")
     gravity: Vec3 = setting((0.0, 0.0, -9.81), doc="gravitational acceleration (z is up)",
                             unit="m/s²")
     drag: float = setting(0.0, doc="air drag: f = -drag * area * v per vertex", unit="N·s/m³",
