@@ -28,6 +28,9 @@ def test_a_moving_grip_run_is_rank_invariant(tmp_path):
             got[n] = (f["frames/positions"][...],
                       np.array([f[f"diagnostics/reaction_{g}_{c}"][...] for g in (0, 1)
                                 for c in "xyz"]))
+    from distcloth.io.preview import write_previews
+    drawn = write_previews(tmp_path / "r1.h5")
+    assert str(tmp_path / "r1_reactions.png") in drawn and (tmp_path / "r1_reactions.png").stat().st_size
     pos1, reac1 = got[1]
     assert reac1[3, -1] > 0 > reac1[0, -1]          # the jaws pull the strip apart
     for n in (2,):
