@@ -1,7 +1,8 @@
 """The energy guard: a passive cloth must not gain energy.
 
-Without external work (pins are fixed; colliders do work only while they
-move) the total energy E = kinetic + gravitational + elastic of a cloth can
+Without external work (pins are fixed or their grips have stopped; colliders
+do work only while they move; a load only while its ramp runs, and a constant
+load's potential -F . x is counted with gravity's) the total energy E = kinetic + gravitational + elastic of a cloth can
 only fall: damping, drag, friction and inelastic contact remove it, and the
 conservative integrators (implicit midpoint, Newmark 1/4-1/2, symplectic
 Euler) keep it up to a bounded oscillation.  A step that leaves E well above
@@ -19,7 +20,10 @@ bounding-box diagonal).  The same definition is criterion 2 of the stability
 classifier (distcloth/study/classify.py), so a run the guard lets through is
 not one the suite calls garbage for its energy.  The check is a rejection
 like NaN or a blow-up: with ``time.adaptive`` the step is retried at h/2,
-otherwise the run stops naming the step and the energy.
+otherwise the run stops naming the step and the energy.  With
+``time.energy_guard: false`` the step is accepted, but the first one above
+the bound is a warning of the run (its step, time and the energy gained),
+which then ends 'completed_with_warnings', never plainly 'completed'.
 """
 from __future__ import annotations
 
@@ -31,20 +35,35 @@ SCALE_FLOOR = 1.0e-12
 
 
 def gravity_scale(cfg, model) -> float:
-    """M |g| L: the gravitational energy a cloth of mass M and size L can exchange."""
-    if not cfg.has("gravity"):
-        return 0.0
-    return float(model.vertex_mass.sum() * np.linalg.norm(cfg.gravity) * model.size())
+    """M |g| L + sum |F| L: the potential energy of gravity and the loads a cloth
+    of mass M and size L can exchange."""
+    scale = 0.0
+    if cfg.has("gravity"):
+        scale += float(model.vertex_mass.sum() * np.linalg.norm(cfg.gravity) * model.size())
+    if cfg.has("loads") and model.loads is not None:
+        scale += model.loads.total() * model.size()
+    return scale
+
+
+def drive_end(cfg, model) -> float:
+    """When the grips and load ramps stop doing work on the cloth (0: never
+    started; inf: a grip that never stops)."""
+    end = max((g.path.end for g in model.grips if g.path is not None), default=0.0)
+    if cfg.has("loads") and model.loads is not None:
+        end = max(end, model.loads.end)
+    return end
 
 
 class EnergyGuard:
     """The guard's settings; its reference (E_ref, S) is part of the State,
     taken at the first committed state of the passive window."""
 
-    def __init__(self, gain: float | None, drive_end: float, gravity_scale: float):
+    def __init__(self, gain: float | None, drive_end: float, gravity_scale: float,
+                 enforce: bool = True):
         self.gain = gain                   # None: off
-        self.drive_end = float(drive_end)  # s: colliders move until here
+        self.drive_end = float(drive_end)  # s: colliders, grips and ramps act until here
         self.gravity_scale = float(gravity_scale)
+        self.enforce = enforce             # False: a gain is a warning, not a rejection
 
     def wants_reference(self, t: float, reference) -> bool:
         """True at the first committed state of the passive window."""
@@ -61,9 +80,10 @@ class EnergyGuard:
         if self.gain is None or reference is None:
             return None
         e_ref, scale = reference
-        excess = (kinetic + gravitational + elastic - e_ref) / scale
+        gained = kinetic + gravitational + elastic - e_ref
+        excess = gained / scale
         if excess > self.gain:
             return (f"energy gain: total energy {excess:.3g} S above the passive scene's "
                     f"{e_ref:.4g} J (S = {scale:.3g} J, limit time.max_energy_gain = "
-                    f"{self.gain:g} S)")
+                    f"{self.gain:g} S): {gained:.4g} J gained")
         return None

@@ -3,7 +3,8 @@
 The scene, the ranks, the status (a 'running' file whose processes are gone
 is reported as killed: io/liveness.py), steps and frames written, the
 checkpoint to resume from, the time per stage summed over the steps
-(/diagnostics/stage_time), and warnings the diagnostics record; ``--plots``
+(/diagnostics/stage_time), and warnings: those the run recorded (attribute
+warnings) and those the diagnostics show; ``--plots``
 writes the preview pictures again.
 """
 from __future__ import annotations
@@ -44,7 +45,7 @@ def describe(path: str) -> list[str]:
         lines.append(f"resumed:    at step {', '.join(map(str, resumed))}")
     lines.append("checkpoint: " + _checkpoint(path, a))
     lines += _stage_times(res["stage_time"], res["stage_calls"])
-    warnings = _warnings(res["diagnostics"])
+    warnings = _recorded_warnings(a) + _warnings(res["diagnostics"])
     lines.append("warnings:   " + ("none" if not warnings else warnings[0]))
     lines += [f"            {w}" for w in warnings[1:]]
     return lines
@@ -59,6 +60,8 @@ def _status(a) -> str:
                f"{a.get('interrupted_step')}"
     if status == "running":
         return f"running: {judge(a)[1]}"
+    if status == "completed_with_warnings":
+        return "completed_with_warnings (the run reached its end; see warnings below)"
     return str(status)
 
 
@@ -87,6 +90,12 @@ def _stage_times(stage_time: dict, stage_calls: dict) -> list[str]:
         lines.append(f"  {name:<20}{seconds:>10.3f}{100 * seconds / whole:>7.1f}%"
                      f"{calls[name]:>9} calls")
     return lines
+
+
+def _recorded_warnings(a) -> list[str]:
+    """The warnings the run recorded (attribute warnings: the energy guard's,
+    when it was off), each with its step."""
+    return [str(w) for w in np.atleast_1d(a.get("warnings", []))]
 
 
 def _warnings(diag: dict) -> list[str]:

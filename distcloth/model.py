@@ -7,6 +7,7 @@ local springs) live in :class:`distcloth.parallel.layout.LocalLayout`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -67,6 +68,14 @@ class Model:
     uv_index: np.ndarray | None = None            # (nt, 3) rows of uv, -1: none
     pattern_vertex: np.ndarray | None = None      # (n_pattern,) simulated vertex of each
     #   pattern vertex (identity before welding)
+    # grips and loads (scene/grips.py): each pins entry, each vertex's entry, the loads
+    grips: list = field(default_factory=list)
+    pin_group: np.ndarray | None = None           # (n,) index into grips, -1: not held
+    loads: Any = None                             # scene.grips.Loads, None: none
+
+    @property
+    def moving_grips(self) -> bool:
+        return any(g.path is not None for g in self.grips)
 
     @property
     def num_vertices(self) -> int:

@@ -17,6 +17,7 @@ the result file.
 """
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -37,7 +38,7 @@ from .io.liveness import identity
 from .restart import restore_solver, restore_state
 from .scene import build_model
 from .sew import garment_arrays, sew, welded_model
-from .simulation import DIAGNOSTICS, Simulation, SimulationError
+from .simulation import Simulation, SimulationError
 from .stages import STAGES
 
 
@@ -115,6 +116,23 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None
                         arrays=arrays, fields=FRAME_FIELDS, resume_step=resume_step)
 
 
+def grip_attrs(sim) -> dict:
+    """The result file's names of the pin groups whose reactions it records
+    (diagnostics reaction_<k>_x/y/z, k the position in this list)."""
+    return {"grips": sim.held.names} if sim.record_reactions else {}
+
+
+def refuse_moving_grips(cfg) -> ConfigError | None:
+    """``distcloth drape`` relaxes to a rest state, which a moving grip never has."""
+    for p, spec in enumerate(cfg.cloth):
+        for k, pin in enumerate(spec.pins):
+            if pin.motion is not None:
+                return ConfigError(f"cloth.{p}.pins.{k}.motion", "a motion",
+                                   "null for distcloth drape (a grip that moves has no rest "
+                                   "state to relax to; use distcloth run)")
+    return None
+
+
 def sew_if_needed(sim, cfg, comm, path, *, force=False, quiet=False, cmdline_options=None,
                   progress=True):
     """A scene with stitches is sewn and welded first (sew.py); returns the
@@ -149,6 +167,9 @@ def write_steps(sim, writer, n_steps: int, every: int, bar=None, after_step=None
         times, calls = sim.pipeline.take_step_counters()
         _agreed_write(sim, writer, writer.write_step, sim.state.step, sim.state.t, diag, times,
                       calls)
+        while sim.warnings:          # the same on every rank: from global sums
+            step, _, kind, message = sim.warnings.pop(0)
+            _agreed_write(sim, writer, writer.record_warning, step, kind, message)
         if k % every == 0 or k == n_steps:
             _agreed_write(sim, writer, sim.pipeline.run, "output", writer)
         if bar:
@@ -218,9 +239,10 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
     for c in sim.contact.colliders:
         if c.region is not None:
             log(comm, f"collider {c.name} in contact: {c.region}")
-    writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
+    writer = open_writer(sim, cfg, comm, path, sim.diagnostic_names(),
                          {"steps": n_steps, "output_every_steps": every,
-                          "checkpoint": os.path.basename(checkpoint_path(path)), **image},
+                          "checkpoint": os.path.basename(checkpoint_path(path)), **image,
+                          **grip_attrs(sim)},
                          garment_arrays(sim.model),
                          resume_step=None if restart is None else sim.state.step)
     if restart is None:
@@ -248,7 +270,7 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
     if signum:
         writer.record_interrupt(sim.state.step, signal_name(signum))
         status, code = "interrupted", 128 + signum
-    writer.close(status)
+    status = writer.close(status)
     wall = time.perf_counter() - t_start
     traversal = sim.contact.traversal_summary()      # collective
     if signum:
@@ -258,6 +280,9 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
         log(comm, f"stage times (rank 0):\n{sim.pipeline.summary()}")
         if traversal:
             log(comm, traversal)
+        if sim.energy_warnings:
+            log(comm, f"warning: {sim.energy_warnings} accepted steps above the energy guard's "
+                      f"bound (time.energy_guard: false); the first is recorded in the result")
         if sim.limiter_unconverged_steps:
             log(comm, f"warning: strain limiting did not reach its bound in "
                       f"{sim.limiter_unconverged_steps} steps (strain_limiting.passes = "
@@ -275,9 +300,15 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     'time' is the iteration.  SIGTERM or SIGINT ends it after the iteration
     (status 'interrupted'); a relaxation has no checkpoint: it starts again."""
     t_start = time.perf_counter()
+    code = _agree_config(comm, refuse_moving_grips(cfg))
+    if code:
+        return code
     sim, code = setup(cfg, comm, cmdline_options=cmdline_options, quiet=quiet)
     if code:
         return code
+    for term in sim.terms:         # a drape relaxes under the loads' full values
+        if term.name == "force:loads":
+            term.at_time(math.inf)
     spec = cfg.drape
     path = output or cfg.output.file
     sim, code, _ = sew_if_needed(sim, cfg, comm, path, quiet=quiet,

@@ -19,9 +19,7 @@ import numpy as np
 from .config.schema import ConfigError
 from .garment.weld import SeamMaterial, weld_model
 from .io.console import Progress, log
-from .simulation import DIAGNOSTICS, Simulation, SimulationError
-
-SEWING_DIAGNOSTICS = (*DIAGNOSTICS, "stitch_gap")
+from .simulation import Simulation, SimulationError
 
 
 def sewing_path(path: str) -> str:
@@ -39,7 +37,7 @@ def sew(sim: Simulation, cfg, comm, path: str, writer_factory, *, quiet=False,
     h = cfg.time.step
     every = max(1, int(round(cfg.output.every / h)))
     max_steps = int(np.ceil(spec.max_duration / h - 1e-9))
-    writer = writer_factory(sim, sewing_path(path), list(SEWING_DIAGNOSTICS),
+    writer = writer_factory(sim, sewing_path(path), sim.diagnostic_names() + ["stitch_gap"],
                             {"phase": "sewing", "sewing_duration": spec.duration,
                              "sewing_tolerance": spec.tolerance})
     log(comm, f"sewing {sim.model.stitch_pairs.shape[0]} stitched pairs "

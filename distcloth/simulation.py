@@ -18,9 +18,10 @@ import numpy as np
 from .collision.contact import MAX_CONTACT_PASSES, ContactModel
 from .config.load import command_line_key
 from .config.schema import DEFAULT_SOLVER, OPTION_PREFIX, ConfigError
-from .energy_guard import EnergyGuard, gravity_scale
+from .energy_guard import EnergyGuard, drive_end as grip_drive_end, gravity_scale
 from .frame_fields import FrameFields
 from .integrate import make_integrator
+from .kinematics import HeldVertices
 from .io.console import log
 from .linalg.assembly import (assemble_blocks, constraint_impulses, gershgorin_bound,
                               solve_constrained)
@@ -48,6 +49,12 @@ DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_e
                "tasks_created", "tasks_stolen", "steals_refused", "steal_messages",
                "steal_latency_max", "limited_springs", "limiter_passes", "limited_strain")
 MAX_SPEED = 1.0e3   # m/s: beyond this a cloth simulation has blown up
+
+
+def reaction_names(group: int) -> tuple[str, str, str]:
+    """Diagnostic names of pin group ``group``'s reaction (the result file's
+    attribute ``grips`` names the groups in this order)."""
+    return tuple(f"reaction_{group}_{c}" for c in "xyz")
 
 
 class SimulationError(Exception):
@@ -81,6 +88,16 @@ class Simulation:
         self.state = State(x=model.start_positions()[local].astype(np.float64).copy(),
                            v=model.start_velocities()[local].astype(np.float64).copy())
         self._hold(model, lay)
+        self.held = HeldVertices(model, lay, self.pinned_local, self.slide_local, self.slide_S,
+                                 self.mass)
+        wanted = cfg.output.reactions
+        self.record_reactions = bool(model.grips) and (
+            wanted if wanted is not None
+            else model.moving_grips or (cfg.has("loads") and model.loads is not None
+                                        and model.loads.vertices.size > 0))
+        self.warnings: list[tuple[int, float, str, str]] = []   # (step, t, kind, message) to record
+        self.energy_warnings = 0          # accepted steps above the guard's bound (guard off)
+        self._energy_excess = None
         self.ghosts = GhostExchange(lay, comm)
         self._fields = FrameFields(model, lay, comm.rank, self.ghosts)
         self.integrator = make_integrator(cfg)
@@ -108,11 +125,12 @@ class Simulation:
         tc = cfg.time
         # stitch springs shortening do work on the garment: a sewing scene is
         # driven until its seams are welded (the welded simulation is passive)
-        drive_end = self.contact.drive_end
+        drive_end = max(self.contact.drive_end, grip_drive_end(cfg, model))
         if model.stitch_pairs is not None:
             drive_end = max(drive_end, cfg.garment.sewing.max_duration)
-        self.energy_guard = EnergyGuard(tc.max_energy_gain if tc.energy_guard else None,
-                                        drive_end, gravity_scale(cfg, model))
+        # off, the guard still measures: a gain past its bound is a warning of the run
+        self.energy_guard = EnergyGuard(tc.max_energy_gain, drive_end, gravity_scale(cfg, model),
+                                        enforce=tc.energy_guard)
         self.h = cfg.time.step
         self._cmdline = cmdline_options or set()
         self._inserted_options: list[str] = []
@@ -254,15 +272,17 @@ class Simulation:
                               f"integrator, or --force")
 
     # ---------------------------------------------------------------- stages
-    def _kinematics(self, t_end=None):
-        """Prescribed velocities at the end of the step of the held vertices
-        (pins, then sliding pins): held pins are at rest; and the rest lengths
-        of time-dependent terms (stitch springs) at the end of the step."""
-        if t_end is not None:
-            for term in self.terms:
-                if hasattr(term, "at_time"):
-                    term.at_time(t_end)
-        return np.zeros((self.pinned_local.size + self.slide_local.size, 3))
+    def _kinematics(self, t_end=None, h=None):
+        """Target velocities of the held vertices (pins, then sliding pins): zero
+        for pins at rest, for a moving grip the one that ends the step on its
+        path (kinematics.py); and time-dependent terms (stitch rest lengths,
+        load ramps) at the end of the step."""
+        if t_end is None:
+            return np.zeros((self.held.rows.size, 3))
+        for term in self.terms:
+            if hasattr(term, "at_time"):
+                term.at_time(t_end)
+        return self.held.targets(self.state, h, t_end, self.integrator)
 
     def constraints(self, target_velocity=None, contacts=None) -> Constraints:
         """Pins (S = 0), sliding pins (S = I - a a^T) and contacts (S = I - n n^T,
@@ -307,10 +327,11 @@ class Simulation:
     def _local_potentials(self, x) -> tuple[float, float]:
         """(gravitational, elastic) energy of this rank's share at x: every term
         with a potential (springs, FE membrane, hinges, shells); damping, drag
-        and friction have none."""
+        and friction have none.  The loads' potential -F . x, like gravity's a
+        constant force's, is counted as gravitational."""
         grav = elastic = 0.0
         for t in self.terms:
-            if t.name == "force:gravity":
+            if t.name in ("force:gravity", "force:loads"):
                 grav += t.energy(x)
             else:
                 elastic += t.energy(x)
@@ -374,7 +395,30 @@ class Simulation:
             "newton_unconverged": self.state.newton_unconverged,
             **self.contact.diagnostics(result.contact_report),
             **(self.limiter.diagnostics(result.limit_report) if self.limiter else {}),
+            **self._reactions(),
         }
+
+    def diagnostic_names(self) -> list[str]:
+        """The names of the diagnostics a step reports: DIAGNOSTICS, then each
+        pin group's reaction components when the run records them."""
+        groups = range(len(self.held.grips)) if self.record_reactions else range(0)
+        return list(DIAGNOSTICS) + [name for g in groups for name in reaction_names(g)]
+
+    def _reactions(self) -> dict:
+        """Each pin group's reaction (N) at the committed state (collective):
+        one evaluation of every force term there, outside the stage counters
+        (they count the integrator's evaluations)."""
+        if not self.record_reactions:
+            return {}
+        x, v = self.state.x, self.state.v
+        f = np.zeros((self.n_local, 3))
+        for t in self.terms:
+            if t.name != "force:friction":     # acts on contacts, never on held vertices
+                t.evaluate(x, v, f, False)
+        total = self.comm.sum(self.held.reactions(f, self.state.acceleration).ravel())
+        total = total.reshape(-1, 3)
+        return {name: float(total[g, c]) for g in range(total.shape[0])
+                for c, name in enumerate(reaction_names(g))}
 
     def _output(self, writer):
         writer.write_frame(self.state.step, self.state.t, self.owned_positions(),
@@ -424,7 +468,7 @@ class Simulation:
         committed (the state's time becomes ``t_end``), else (None, reason,
         fatal) with the state unchanged."""
         state, pipe, contact = self.state, self.pipeline, self.contact
-        target = pipe.run("kinematics", t_end)
+        target = pipe.run("kinematics", t_end, h)
         revision, contacts, result = None, None, None
         for _ in range(MAX_CONTACT_PASSES if contact.has_bodies else 1):
             if contact.has_bodies:
@@ -451,6 +495,7 @@ class Simulation:
             revision = contact.revise(contacts, result, state.t + h, h, revision)
             if revision is None:
                 break
+        self.held.hold(result.v, t_end)
         result.contact_report, result.touching, result.limit_report = None, None, None
         if self.limiter is not None:
             result.limit_report = pipe.run("strain_limiting", state, result, contacts, h)
@@ -496,6 +541,14 @@ class Simulation:
                 f"newton_unconverged (time.require_newton_convergence rejects)")
         if self.energy_guard.wants_reference(state.t, state.energy_reference):
             state.energy_reference = self.energy_guard.reference(*result.energies)
+        if self._energy_excess is not None:
+            if self.energy_warnings == 0:
+                message = (f"step {state.step} (t = {state.t:.6g} s): {self._energy_excess}; "
+                           f"accepted because time.energy_guard is false")
+                self.say("warning: " + message)
+                self.warnings.append((state.step, state.t, "energy_gain", message))
+            self.energy_warnings += 1
+            self._energy_excess = None
         report = result.limit_report
         if report is not None and not report.converged:
             self.limiter_unconverged_steps = self._counted(
@@ -529,7 +582,11 @@ class Simulation:
         if self.cfg.time.max_strain is not None and strain > self.cfg.time.max_strain:
             return f"strain {strain:.3g} exceeds time.max_strain = {self.cfg.time.max_strain:g}", None
         energies = self.energies()
-        return self.energy_guard.check(self.state.energy_reference, *energies), energies
+        reason = self.energy_guard.check(self.state.energy_reference, *energies)
+        self._energy_excess = None
+        if reason is not None and not self.energy_guard.enforce:
+            self._energy_excess, reason = reason, None     # accepted: a warning at commit
+        return reason, energies
 
     def destroy(self):
         if self.system is not None:

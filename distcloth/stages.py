@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from .physics.loads import build_loads
 from .physics.sewing import build_seams, build_sewing
 from .physics.terms import build_bending, build_damping, build_drag, build_gravity, build_membrane
 
@@ -43,8 +44,10 @@ class Stage:
 
 
 STEP_STAGES: tuple[Stage, ...] = (
-    Stage("kinematics", "always", "held vertices", "target velocities of held vertices",
-          "prescribed velocities of pinned and sliding-pinned vertices at the end of the step"),
+    Stage("kinematics", "always", "held vertices, t, the integrator's position update",
+          "target velocities of held vertices; time-dependent forces at the end of the step",
+          "velocities that put pinned and sliding-pinned vertices where their grip's path "
+          "(at rest, or a prescribed motion) is at the end of the step"),
     Stage("collision:bodies", "colliders and the collisions effect",
           "x, v, colliders at t, contacts the attempt released or missed", "contacts",
           "vertices predicted to end a step of free flight within the contact distance of a "
@@ -53,6 +56,9 @@ STEP_STAGES: tuple[Stage, ...] = (
           "pins, sliding pins and contacts as per-vertex projections S and velocity changes z"),
     Stage("force:gravity", "effect gravity", "vertex masses", "forces",
           "weight m g", effect="gravity", build=build_gravity),
+    Stage("force:loads", "effect loads", "t", "forces",
+          "point and line loads on selected vertices, ramped from zero over their ramp time",
+          effect="loads", build=build_loads),
     Stage("force:membrane", "effect membrane", "x", "forces, stiffness blocks",
           "in-plane elasticity: structural and shear springs, or FE triangles",
           effect="membrane", build=build_membrane),

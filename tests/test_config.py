@@ -153,7 +153,8 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
     assert again == config
 
 
-THE_EFFECTS = "one of gravity | membrane | bending | damping | drag | collisions | self_collision | strain_limiting"
+THE_EFFECTS = ("one of gravity | membrane | bending | damping | drag | collisions | self_collision | "
+               "strain_limiting | loads")
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
              "newmark_gamma, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
              "require_newton_convergence")
@@ -191,7 +192,8 @@ ERRORS = [
     ("effects", ["gravity", "wind"], f"effects.1: 'wind' — {THE_EFFECTS}"),
     ("effects", ["drag", "drag"], "effects.1: 'drag' — each effect at most once"),
     ("effects", "gravity", "effects: 'gravity' — a list of effect names: gravity, membrane, "
-                           "bending, damping, drag, collisions, self_collision, strain_limiting"),
+                           "bending, damping, drag, collisions, self_collision, strain_limiting, "
+                           "loads"),
     ("time", {"stepp": 0.01},
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
@@ -276,6 +278,53 @@ ERRORS = [
      "compression is a branch of the tabulated stvk law)"),
     ("drape", {"criterion": "energy"},
      "drape.criterion: 'energy' — one of force | motion"),
+    # grips, loads, initial velocities (docs/loads_and_grips.md)
+    ("cloth.0.pins", [{"edge": "left", "motion": {"velocity": [1, 0, 0], "stop": 0}}],
+     "cloth.0.pins.0.motion.stop: 0 — a finite number > 0"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"velocity": [1, 0, 0], "start": 2, "stop": 1}}],
+     "cloth.0.pins.0.motion.stop: 1.0 — a time > start (2 s), or null"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"velocity": [1, 0, 0], "times": [0, 1]}}],
+     "cloth.0.pins.0.motion: {velocity: [1, 0, 0], times: [0, 1]} — exactly one of velocity, "
+     "times"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"velocity": [1, 0]}}],
+     "cloth.0.pins.0.motion.velocity: [1, 0] — a list of 3 numbers"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"times": [0, 1], "translations": [[0, 0, 0]]}}],
+     "cloth.0.pins.0.motion.translations: [[0, 0, 0]] — a list of 2 [x, y, z] vectors (one per "
+     "time)"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"times": [0, 1],
+                                                  "rotations": [[0, 0, 1], [0, 0, 0]]}}],
+     "cloth.0.pins.0.motion.rotations.0: [0.0, 0.0, 1.0] — [0, 0, 0]: a grip moves from where "
+     "it starts (the first keyframe is its start pose)"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"times": [1, 1]}}],
+     "cloth.0.pins.0.motion.times.1: 1.0 — a time > 1 (times strictly increasing)"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"times": [-1, 1]}}],
+     "cloth.0.pins.0.motion.times.0: -1 — a finite number >= 0"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"velocity": [1, 0, 0], "center": [0, 0, 0]}}],
+     "cloth.0.pins.0.motion.center: [0, 0, 0] — only with times (a keyframed motion)"),
+    ("cloth.0.pins", [{"edge": "left", "motion": {"times": [0, 1], "stop": 2}}],
+     "cloth.0.pins.0.motion.stop: 2 — only with velocity (a constant-velocity motion)"),
+    ("cloth.0.loads", [{"force": [0, 0, -1]}],
+     "cloth.0.loads.0: {force: [0, 0, -1]} — exactly one of edge, corner, indices, box"),
+    ("cloth.0.loads", [{"edge": "left"}],
+     "cloth.0.loads.0: {edge: 'left'} — exactly one of force, forces, line_force"),
+    ("cloth.0.loads", [{"edge": "left", "forces": [[0, 0, 1]]}],
+     "cloth.0.loads.0.forces: [[0, 0, 1]] — only with indices (one force per index); use force "
+     "for the other selectors"),
+    ("cloth.0.loads", [{"indices": [0, 1], "forces": [[0, 0, 1]]}],
+     "cloth.0.loads.0.forces: [[0, 0, 1]] — a list of 2 [x, y, z] vectors (one per index)"),
+    ("cloth.0.loads", [{"corner": "top_left", "force": [0, 0, -1], "ramp": -1}],
+     "cloth.0.loads.0.ramp: -1 — a finite number >= 0"),
+    ("cloth.0.loads", [{"corner": "top_left", "line_force": "down"}],
+     "cloth.0.loads.0.line_force: 'down' — a list of 3 numbers"),
+    ("cloth.1.loads", [{"edge": "top", "force": [0, 0, 1]}],
+     "cloth.1.loads.0.edge: 'top' — edge loads only on grid meshes; use indices or box"),
+    ("effects", ["gravity", "loads"],
+     "effects: ['gravity', 'loads'] — the loads effect needs at least one entry under "
+     "cloth.<i>.loads"),
+    ("cloth.0.initial_velocity", [1, 0], "cloth.0.initial_velocity: [1, 0] — a list of 3 numbers"),
+    ("cloth.0.initial_angular_velocity", [0, 0, "fast"],
+     "cloth.0.initial_angular_velocity.2: 'fast' — a finite number"),
+    ("output", {"reactions": "yes"}, "output.reactions: 'yes' — true or false"),
 ]
 
 

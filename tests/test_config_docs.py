@@ -88,3 +88,14 @@ def test_the_example_scene_in_the_docs_is_valid(tmp_path):
     example = re.search(r"```yaml\n(.*?)```", text, flags=re.S).group(1)
     config = config_from_dict(yaml.safe_load(example), str(tmp_path), "example.yaml")
     assert config.scene == "hanging_square" and config.linear_system.mat_type == "baij"
+
+
+@pytest.mark.parametrize("path", ["drape", "cloth.<i>.pins.<j>.motion", "cloth.<i>.loads.<j>"])
+def test_sections_have_their_table_with_every_key(path):
+    """The drape section (read by distcloth drape only) and the grips' and
+    loads' sections each have their table, one row per key."""
+    spec_type = dict(section_paths(SceneConfig))[path]
+    text = DOCS_FILE.read_text(encoding="utf-8")
+    table = text.split(f"### `{path}`\n", 1)[1].split("\n### ", 1)[0]
+    for e in entries(spec_type):
+        assert f"| `{e.key}` |" in table, (path, e.key)

@@ -294,6 +294,33 @@ def test_record_error_keeps_frames_and_marks_failed(shared_dir):
     on_root(check)
 
 
+def test_a_warning_makes_a_completed_run_completed_with_warnings(shared_dir):
+    """Warnings are kept one per kind, with their step; a resumed file keeps
+    those of the steps up to the resume step (a later one is met again)."""
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "warned.h5")
+    w = syn.writer(path)
+    syn.write_run(w, frames=2)
+    w.record_warning(7, "energy_gain", "step 7 (t = 0.08 s): energy gain" if RANK == 0 else "x")
+    w.record_warning(9, "energy_gain", "a second one of the kind")           # kept: the first
+    w.record_warning(9, "other", "step 9: another kind")
+    assert w.close() == "completed_with_warnings"
+
+    def check():
+        a = read_result(path)["attrs"]
+        assert a["status"] == "completed_with_warnings"
+        assert a["warnings"] == ["step 7 (t = 0.08 s): energy gain", "step 9: another kind"]
+        assert list(a["warning_steps"]) == [7, 9] and a["warning_kinds"] == ["energy_gain", "other"]
+
+    on_root(check)
+    w = syn.writer(path, resume_step=8)
+    assert [k for _, k, _ in w.warnings()] == ["energy_gain"]
+    assert w.close() == "completed_with_warnings"
+    w = syn.writer(path, resume_step=4)
+    assert w.warnings() == []
+    assert w.close() == "completed"
+
+
 def test_collective_error_in_with_block_closes_failed(shared_dir):
     syn = Synthetic()
     path = os.path.join(shared_dir, "collective.h5")

@@ -12,8 +12,8 @@ from .checks import join
 from .describe import entries, entry, needs
 from .fabrics import FABRICS
 from .schema import (FEM_ONLY, MESH_ONLY, OPTIONAL_SHAPE_KEYS, SHAPE_KEYS, ColliderGeometry,
-                     ColliderSpec, ConfigError, FusedSpec, MaterialSpec, MeshSpec, MotionSpec,
-                     PinSpec, SceneConfig, SewingSpec, TimeSpec)
+                     ColliderSpec, ConfigError, FusedSpec, LoadSpec, MaterialSpec, MeshSpec,
+                     MotionSpec, PinMotionSpec, PinSpec, SceneConfig, SewingSpec, TimeSpec)
 from .walk import Context, Rules, read_field, required_text
 
 PER_TIME = ("translations", "rotations")     # MotionSpec keys with one entry per time
@@ -21,15 +21,16 @@ PER_TIME = ("translations", "rotations")     # MotionSpec keys with one entry pe
 STEP_MULTIPLE_TOLERANCE = 1e-6
 
 
-def _pin(pin: PinSpec, section: dict, key: str, ctx: Context) -> PinSpec:
+def _selector(pin, section: dict, key: str, ctx: Context):
     """Grid selectors need a grid; indices must exist on a grid (a file mesh's
     vertex count is known only once the scene builder reads it); a box needs
-    both corners, in order."""
+    both corners, in order (pins and loads)."""
     grid = ctx.parent["mesh"].grid
     for kind in ("edge", "corner"):
         if getattr(pin, kind) is not None and grid is None:
             raise ConfigError(join(key, kind), section[kind],
-                              f"{kind} pins only on grid meshes; use indices or box")
+                              f"{kind} {'pins' if isinstance(pin, PinSpec) else 'loads'} only "
+                              "on grid meshes; use indices or box")
     if pin.indices is not None and grid is not None:
         count = grid.resolution[0] * grid.resolution[1]
         for i, index in enumerate(pin.indices):
@@ -39,11 +40,44 @@ def _pin(pin: PinSpec, section: dict, key: str, ctx: Context) -> PinSpec:
     if section.get("box") is not None:
         for name in ("box_min", "box_max"):
             if getattr(pin, name) is None:
-                e = entry(PinSpec, name)
+                e = entry(type(pin), name)
                 raise ConfigError(join(key, e.key), None, required_text(e))
         if any(a > b for a, b in zip(pin.box_min, pin.box_max)):
             raise ConfigError(join(key, "box"), section["box"], "min <= max in every component")
     return pin
+
+
+def _load(load: LoadSpec, section: dict, key: str, ctx: Context) -> LoadSpec:
+    """A selected vertex set, and per-vertex forces only for listed indices."""
+    load = _selector(load, section, key, ctx)
+    if load.forces is not None:
+        if load.indices is None:
+            raise ConfigError(join(key, "forces"), section["forces"],
+                              "only with indices (one force per index); use force for the "
+                              "other selectors")
+        if len(load.forces) != len(load.indices):
+            raise ConfigError(join(key, "forces"), section["forces"],
+                              f"a list of {len(load.indices)} [x, y, z] vectors (one per index)")
+    return load
+
+
+def _pin_motion(motion: PinMotionSpec, section: dict, key: str, ctx: Context) -> PinMotionSpec:
+    """Keyframes start from where the pins are: the first pose is zero (a grip
+    that jumped at t = 0 would be a teleport, not a motion); a velocity stops
+    after it starts."""
+    if motion.velocity is not None:
+        if motion.stop is not None and motion.stop <= motion.start:
+            raise ConfigError(join(key, "stop"), motion.stop,
+                              f"a time > start ({motion.start:g} s), or null")
+        return motion
+    motion = _motion_zeros(motion, section, key, ctx)
+    for name in PER_TIME:
+        first = getattr(motion, name)[0]
+        if any(c != 0.0 for c in first):
+            raise ConfigError(join(join(key, name), 0), list(first),
+                              "[0, 0, 0]: a grip moves from where it starts (the first "
+                              "keyframe is its start pose)")
+    return motion
 
 
 def _mesh(mesh: MeshSpec, section: dict, key: str, ctx: Context) -> MeshSpec:
@@ -190,9 +224,11 @@ def _collider(spec: ColliderSpec, section: dict, key: str, ctx: Context) -> Coll
     return replace(spec, geometry=geometry)
 
 
-def _motion_per_time(section: dict, key: str, ctx: Context) -> dict:
+def _motion_per_time(section: dict, key: str, ctx: Context, spec_type: type = MotionSpec) -> dict:
     """Times strictly increasing; one translation and one rotation per time."""
-    times = read_field(MotionSpec, "times", section, key, ctx)
+    times = read_field(spec_type, "times", section, key, ctx)
+    if times is None:           # a pin motion by velocity
+        return section
     for i in range(1, len(times)):
         if not times[i] > times[i - 1]:
             raise ConfigError(join(join(key, "times"), i), times[i],
@@ -201,7 +237,7 @@ def _motion_per_time(section: dict, key: str, ctx: Context) -> dict:
         raw = section.get(name)
         if raw is not None and (not isinstance(raw, list) or len(raw) != len(times)):
             raise ConfigError(join(key, name), raw,
-                              f"a list of {len(times)} {entry(MotionSpec, name).setting.what}")
+                              f"a list of {len(times)} {entry(spec_type, name).setting.what}")
     return section
 
 
@@ -242,6 +278,15 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
     if "collisions" in config.effects and not config.colliders:
         raise ConfigError("effects", list(config.effects),
                           "the collisions effect needs at least one entry under colliders:")
+    for p, spec in enumerate(config.cloth):
+        for k, pin in enumerate(spec.pins):
+            if pin.motion is not None and spec.mesh.pattern is not None:
+                raise ConfigError(f"cloth.{p}.pins.{k}.motion", "a motion",
+                                  "null on a pattern piece (its vertices are renumbered when "
+                                  "the garment is welded); pins of a pattern piece stay put")
+    if "loads" in config.effects and not any(spec.loads for spec in config.cloth):
+        raise ConfigError("effects", list(config.effects),
+                          "the loads effect needs at least one entry under cloth.<i>.loads")
     _unique_names(config.colliders, "colliders", "collider")
     _garment_pieces(config)
     return config
@@ -257,7 +302,11 @@ def _unique_names(items: tuple[Any, ...], key: str, noun: str) -> None:
 
 
 RULES: dict[type, Rules] = {
-    PinSpec: Rules(after=_pin),
+    PinSpec: Rules(after=_selector),
+    LoadSpec: Rules(after=_load),
+    PinMotionSpec: Rules(before=lambda section, key, ctx: _motion_per_time(section, key, ctx,
+                                                                           PinMotionSpec),
+                         after=_pin_motion),
     MeshSpec: Rules(after=_mesh),
     FusedSpec: Rules(after=_fused),
     SewingSpec: Rules(after=_sewing),

@@ -15,7 +15,7 @@ from .describe import GIVEN, Only, choice, section, setting
 from .fabrics import FABRICS
 
 EFFECTS = ("gravity", "membrane", "bending", "damping", "drag", "collisions", "self_collision",
-           "strain_limiting")
+           "strain_limiting", "loads")
 LIMIT_METHODS = ("provot", "velocity")
 VELOCITY_RULES = ("average", "directional")
 COLLIDER_SHAPES = ("plane", "sphere", "capsule", "box", "mesh")
@@ -66,6 +66,8 @@ IMAGE_ONLY = Only("method", "image", "only with method: image")
 FILE_ONLY = Only("file", GIVEN, "only for file meshes")
 PATTERN_ONLY = Only("pattern", GIVEN, "only for pattern meshes")
 VELOCITY_ONLY = Only("method", "velocity", "only with method: velocity")
+VELOCITY_GIVEN = Only("velocity", GIVEN, "only with velocity (a constant-velocity motion)")
+TIMES_GIVEN = Only("times", GIVEN, "only with times (a keyframed motion)")
 
 Vec3 = tuple[float, float, float]
 
@@ -124,9 +126,8 @@ class MeshSpec:
 
 
 @dataclass(frozen=True)
-class PinSpec:
-    """Vertices held in place, chosen by one selector; with `axis` they are held
-    only along that direction (a sliding pin)."""
+class VertexSelector:
+    """Vertices of a piece chosen by one selector (pins and loads)."""
     edge: str | None = choice(None, GRID_EDGES, doc="grids only: a side of the grid (u min, "
                               "u max, v min, v max in its own coordinates, before rotation)",
                               one_of="selector")
@@ -142,8 +143,67 @@ class PinSpec:
     box_max: Vec3 | None = setting(None, key="box.max", doc="the box's high corner, >= min "
                                    "in every component", unit="m", what="[x, y, z] in m",
                                    one_of="selector")
+
+
+@dataclass(frozen=True)
+class PinMotionSpec:
+    """Prescribed motion of a pin group (a grip, docs/loads_and_grips.md): a
+    constant velocity, or keyframed translations and rotations about a centre,
+    linear in between and held after the last key.  The held vertices follow
+    it exactly in every integrator; a sliding pin follows its component along
+    the axis."""
+    velocity: Vec3 | None = setting(None, doc="constant velocity of every vertex of the group",
+                                    unit="m/s", one_of="motion")
+    start: float = setting(0.0, doc="velocity: when the group starts moving", unit="s",
+                           at_least=0, only=VELOCITY_GIVEN)
+    stop: float | None = setting(None, doc="velocity: when it stops, > start; null: never",
+                                 unit="s", above=0, only=VELOCITY_GIVEN)
+    times: tuple[float, ...] | None = setting(None, doc="keyframe times, strictly increasing",
+                                              unit="s", nonempty=True, at_least=0,
+                                              what="increasing times in s", one_of="motion")
+    translations: tuple[Vec3, ...] = setting((), doc="keyframes: displacement from the start "
+                                             "position at each time (the first one zero); "
+                                             "default zeros", unit="m",
+                                             what="[x, y, z] vectors (one per time)",
+                                             only=TIMES_GIVEN)
+    rotations: tuple[Vec3, ...] = setting((), doc="keyframes: rotation about center at each "
+                                          "time as a rotation vector (axis times angle; the "
+                                          "first one zero), slerp in between; default zeros",
+                                          unit="rad", what="[x, y, z] vectors (one per time)",
+                                          only=TIMES_GIVEN)
+    center: Vec3 | None = setting(None, doc="keyframes: the point the rotations turn about; "
+                                  "null: the group's centroid at the start", unit="m",
+                                  only=TIMES_GIVEN)
+
+
+@dataclass(frozen=True)
+class PinSpec(VertexSelector):
+    """Vertices held in place, chosen by one selector; with `axis` they are held
+    only along that direction (a sliding pin); with `motion` they move as
+    prescribed (a grip)."""
     axis: Vec3 | None = setting(None, doc="with any selector: hold the vertices only along "
                                 "this direction (S = I - a aᵀ), free across it", nonzero=True)
+    motion: PinMotionSpec | None = setting(None, doc="prescribed motion of the group; null: "
+                                           "held where it starts")
+
+
+@dataclass(frozen=True)
+class LoadSpec(VertexSelector):
+    """An external force on selected vertices of the piece (docs/loads_and_grips.md):
+    a point load split equally (or given per vertex), or a line load along
+    the mesh's boundary edges whose both ends are selected, lumped to their
+    ends by half of each edge's length; constant, or ramped up from zero."""
+    force: Vec3 | None = setting(None, doc="point load: the total force, split equally over "
+                                 "the selected vertices", unit="N", one_of="load")
+    forces: tuple[Vec3, ...] | None = setting(None, doc="point loads with indices: one force "
+                                              "per index, in the same order", unit="N",
+                                              nonempty=True, what="[x, y, z] vectors (one "
+                                              "per index)", one_of="load")
+    line_force: Vec3 | None = setting(None, doc="line load per length of the selected "
+                                      "boundary (a grid edge, or the boundary edges between "
+                                      "selected vertices)", unit="N/m", one_of="load")
+    ramp: float = setting(0.0, doc="the load grows linearly from zero to full over this "
+                          "time; 0: full from the start", unit="s", at_least=0)
 
 
 @dataclass(frozen=True)
@@ -241,6 +301,14 @@ class ClothSpec:
     mesh: MeshSpec = setting(doc="rest shape and placement", what="a mapping with grid: or file:")
     pins: tuple[PinSpec, ...] = setting((), doc="held vertices (a single mapping is a "
                                         "one-element list)", what="pins")
+    loads: tuple[LoadSpec, ...] = setting((), doc="point and line loads (the loads effect; a "
+                                          "single mapping is a one-element list)",
+                                          what="loads")
+    initial_velocity: Vec3 = setting((0.0, 0.0, 0.0), doc="velocity of every vertex at the "
+                                     "start (pinned directions excepted)", unit="m/s")
+    initial_angular_velocity: Vec3 = setting((0.0, 0.0, 0.0), doc="angular velocity about the "
+                                             "piece's centroid at the start, added to "
+                                             "initial_velocity", unit="rad/s")
     material: MaterialSpec = section(MaterialSpec, doc="the material")
     thickness: float = setting(0.001, doc="contact offset of the cloth against colliders and "
                                "itself", unit="m", at_least=0)
@@ -492,7 +560,9 @@ class TimeSpec:
                                        "- 1 of an FE triangle) exceeds this; null: no bound",
                                        above=0)
     energy_guard: bool = setting(True, doc="reject a step that leaves a passive scene with "
-                                 "more than E_ref + max_energy_gain * S of energy (Step health)")
+                                 "more than E_ref + max_energy_gain * S of energy (Step health); "
+                                 "false: such a step is accepted and the run ends "
+                                 "completed_with_warnings")
     max_energy_gain: float = setting(0.1, doc="the guard's margin, a fraction of S = KE + "
                                      "|U_elastic| + M |g| L at the reference", above=0)
     require_newton_convergence: bool = setting(False, doc="true: a step whose Newton loop ends "
@@ -602,6 +672,9 @@ class OutputSpec:
     every: float = setting(0.1, doc="time between frames, >= time.step (rounded to a whole "
                            "number of steps)", unit="s", above=0)
     preview: bool = setting(True, doc="PNG pictures and plots beside the HDF5 file")
+    reactions: bool | None = setting(None, doc="record each pin group's reaction force every "
+                                     "step (one more force evaluation per step); null: when "
+                                     "a pin moves or a load acts")
     checkpoint: CheckpointSpec = section(CheckpointSpec, doc="checkpoints for restarting "
                                          "an interrupted run")
 
@@ -616,7 +689,8 @@ class SceneConfig:
     effects: tuple[str, ...] = choice(("gravity", "membrane", "bending"), EFFECTS,
                                       doc="the forces and stages: collisions needs at least "
                                       "one collider; self_collision uses each piece's "
-                                      "thickness", what="effect names")
+                                      "thickness; loads needs at least one cloth.<i>.loads "
+                                      "entry", what="effect names")
     gravity: Vec3 = setting((0.0, 0.0, -9.81), doc="gravitational acceleration (z is up)",
                             unit="m/s²")
     drag: float = setting(0.0, doc="air drag: f = -drag * area * v per vertex", unit="N·s/m³",

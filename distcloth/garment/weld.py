@@ -17,6 +17,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..model import FLEXION, Model
+from ..scene.grips import group_of_vertices
 
 
 @dataclass(frozen=True)
@@ -182,6 +183,10 @@ def weld_model(model: Model, x: np.ndarray, v: np.ndarray, material: SeamMateria
         drop = np.isin(slide_v, pinned)
         slide_v, slide_a = slide_v[~drop], slide_a[~drop]
     pattern_vertex = new_of if model.pattern_vertex is None else new_of[model.pattern_vertex]
+    grips = [replace(g, vertices=np.unique(new_of[g.vertices])) for g in model.grips]
+    loads = model.loads
+    if loads is not None:
+        loads = replace(loads, vertices=new_of[loads.vertices])
     return replace(
         model, rest_positions=model.rest_positions[first], triangles=tri,
         vertex_mass=mass, vertex_area=area, spring_vertices=spring_vertices,
@@ -193,6 +198,7 @@ def weld_model(model: Model, x: np.ndarray, v: np.ndarray, material: SeamMateria
         hinge_scale=hinge_scale if model.hinge_vertices is not None else None,
         shell_stencil=None, shell_present=None, shell_jump_stencil=None,
         slide_vertices=slide_v, slide_axes=slide_a,
+        grips=grips, pin_group=group_of_vertices(grips, first.shape[0]), loads=loads,
         triangle_weft=None if model.triangle_weft is None else model.triangle_weft[keep],
         triangle_scale=None if model.triangle_scale is None else model.triangle_scale[keep],
         uv_index=None if model.uv_index is None else model.uv_index[keep],

@@ -40,9 +40,17 @@ class StepResult:
 class Integrator:
     implicit = True
     stability_factor = math.inf      # explicit schemes: h < 0.9 * factor / sqrt(lambda_max)
+    held_gain = 1.0                  # a held row ends at x0 + h v0 + held_gain * h * z
 
     def __init__(self, cfg):
         self.cfg = cfg
+
+    def held_path(self, state, h: float, rows: np.ndarray) -> tuple[np.ndarray, float]:
+        """(where the step puts the local ``rows`` in their constrained directions
+        when their velocity change z is zero, dx1/dz): the kinematics stage
+        solves x1 = path(t + h) for z, so a grip is exactly on its path after
+        the step (BW98 §5.3's prescribed change, not a correction after it)."""
+        return state.x[rows] + h * state.v[rows], self.held_gain * h
 
     def step(self, ctx, state, h: float, cons, guess=None) -> StepResult:
         """``guess``: a velocity change (owned rows) to start the first solve from,

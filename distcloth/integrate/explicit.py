@@ -7,7 +7,9 @@ evenly over the step: every stage acceleration is S a + (I - S) z / h.
 2 for symplectic Euler and explicit midpoint (which, without damping, is
 weakly unstable at any h: |amplification|^2 = 1 + (h w)^4 / 4), 2 sqrt(2)
 for RK4 (its stability region reaches 2.83 i on the imaginary axis).
-A velocity change after the step moves positions by h times it.
+A velocity change after the step moves positions by h times it.  A held
+row ends at x0 + h v0 + g h z, g = 1 (symplectic Euler) or 1/2 (midpoint,
+RK4): ``held_gain``.
 """
 from __future__ import annotations
 
@@ -51,6 +53,7 @@ class ExplicitMidpoint(Integrator):
     """Second-order Runge-Kutta, midpoint rule."""
     implicit = False
     stability_factor = 2.0
+    held_gain = 0.5                  # x1 = x0 + h (v0 + z / 2) on held rows
 
     def step(self, ctx, state, h, cons, guess=None):
         n = ctx.n_owned
@@ -67,6 +70,7 @@ class RK4(Integrator):
     """The classical fourth-order Runge-Kutta method on (x, v)."""
     implicit = False
     stability_factor = 2.0 * math.sqrt(2.0)
+    held_gain = 0.5                  # x1 = x0 + h v0 + h (z + z + z) / 6 on held rows
 
     def step(self, ctx, state, h, cons, guess=None):
         n = ctx.n_owned

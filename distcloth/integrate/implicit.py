@@ -106,6 +106,7 @@ class BackwardEuler(ImplicitScheme):
 class ImplicitMidpoint(ImplicitScheme):
     """x1 = x0 + h (v0 + v1)/2, M (v1 - v0) = h f((x0 + x1)/2, (v0 + v1)/2):
     second order, symplectic, no numerical damping."""
+    held_gain = 0.5
 
     def affine(self, ctx, state, h, f0, cons):
         return Affine(state.x + 0.5 * h * state.v, 0.25 * h, 0.5, np.zeros((ctx.n_owned, 3)), h)
@@ -128,6 +129,11 @@ class Newmark(ImplicitScheme):
         x_pred = state.x + h * state.v + h * h * (0.5 - beta - beta * (1.0 - gamma) / gamma) * a0
         return Affine(x_pred, h * beta / gamma, 1.0, h * (1.0 - gamma) * a0[:n], h * gamma)
 
+    def held_path(self, state, h, rows):
+        # a0 has no constrained component (projected): x_pred there is x0 + h v0
+        beta, gamma = self.cfg.time.newmark_beta, self.cfg.time.newmark_gamma
+        return state.x[rows] + h * state.v[rows], h * beta / gamma
+
 
 class BDF2(ImplicitScheme):
     """x1 = 4/3 x0 - 1/3 x_-1 + 2/3 h v1, v1 = 4/3 v0 - 1/3 v_-1 + 2/3 h M^-1 f(x1, v1):
@@ -143,3 +149,10 @@ class BDF2(ImplicitScheme):
 
     def history(self, state, h):
         return MultistepHistory(state.x.copy(), state.v.copy(), h)
+
+    def held_path(self, state, h, rows):
+        hist = state.history
+        if hist is None or hist.h != h:
+            return super().held_path(state, h, rows)
+        return ((4.0 * state.x[rows] - hist.x[rows]) / 3.0 + (2.0 / 3.0) * h * state.v[rows],
+                2.0 * h / 3.0)

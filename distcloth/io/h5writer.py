@@ -34,8 +34,11 @@ Layout (every array in *input* vertex order, whatever the partition)::
     /garment/seam_lines        (m, 2) int64: its welded seam edges
     /colliders/<name> attributes: name (the scene's; '/' in it becomes '_' in
     the group name), shape (plane | sphere | capsule | box | mesh), moving
-    root attributes: status ('running' | 'completed' | 'interrupted' |
-    'failed'), error, error_step, interrupted_step, interrupted_by (a signal
+    root attributes: status ('running' | 'completed' |
+    'completed_with_warnings' | 'interrupted' | 'failed'), error, error_step,
+    warnings, warning_steps, warning_kinds (what a run accepted but the user
+    must hear of: one line, its step and its kind per warning; a finished run
+    with any ends 'completed_with_warnings'), interrupted_step, interrupted_by (a signal
     name), heartbeat (seconds since the epoch of the last frame or flush:
     a 'running' file whose heartbeat stopped belongs to a killed run),
     resumed_at (steps the run was resumed from), frames_written,
@@ -116,7 +119,9 @@ DEFAULT_STEP_BUFFER = 1024
 _RESERVED_ATTRS = frozenset(
     {"status", "error", "error_step", "frames_written", "steps_written",
      "format", "format_version", "interrupted_step", "interrupted_by", "heartbeat",
-     "resumed_at"})
+     "resumed_at", "warnings", "warning_steps", "warning_kinds"})
+# the statuses of a run that reached its end
+FINISHED = ("completed", "completed_with_warnings")
 _RESERVED_DIAGNOSTICS = frozenset({"step", "time", "stage_time", "stage_calls"})
 _RESERVED_FIELDS = frozenset({"positions", "time", "step", "position", "rank"})
 # XDMF NumberType and Precision of the dtypes a field may have
@@ -179,6 +184,10 @@ class _SerialComm:
     @staticmethod
     def synchronize():
         pass
+
+
+def _text(value) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def _check_name(kind: str, name: str) -> str:
@@ -544,6 +553,8 @@ class ResultWriter:
         for key in ("interrupted_step", "interrupted_by"):
             if key in f.attrs:
                 del f.attrs[key]
+        # a warning of a step cut off is met again (or not) by the resumed run
+        self._set_warnings([w for w in self.warnings() if w[0] <= step])
         self._positions = f["frames/positions"]
         self._frame_time = f["frames/time"]
         self._frame_step = f["frames/step"]
@@ -775,6 +786,31 @@ class ResultWriter:
         f.flush()
         self._write_xdmf()
 
+    def warnings(self) -> list[tuple[int, str, str]]:
+        """(step, kind, message) of each warning recorded so far."""
+        a = self._file.attrs
+        steps = [int(s) for s in np.atleast_1d(a.get("warning_steps", np.zeros(0, np.int64)))]
+        kinds = [_text(k) for k in np.atleast_1d(a.get("warning_kinds", []))]
+        lines = [_text(m) for m in np.atleast_1d(a.get("warnings", []))]
+        return list(zip(steps, kinds, lines))
+
+    def _set_warnings(self, warnings) -> None:
+        a = self._file.attrs
+        a["warning_steps"] = np.array([w[0] for w in warnings], dtype=np.int64)
+        a["warning_kinds"] = np.array([w[1] for w in warnings], dtype=h5py.string_dtype())
+        a["warnings"] = np.array([w[2] for w in warnings], dtype=h5py.string_dtype())
+
+    def record_warning(self, step: int, kind: str, message: str) -> None:
+        """Collective: a warning of the run (rank 0's arguments are used); the
+        first of each kind is kept (a resumed run may meet it again)."""
+        self._require_open()
+        step, kind, message = self._comm.broadcast((int(step), str(kind), str(message)), root=0)
+        known = self.warnings()
+        if any(k == kind for _, k, _ in known):
+            return
+        self._set_warnings(known + [(step, kind, message)])
+        self._file.flush()
+
     def flush(self) -> None:
         """Collective: write the buffered steps and flush the file (before a
         checkpoint, so the file holds every step up to it)."""
@@ -791,22 +827,28 @@ class ResultWriter:
         self._file.attrs["interrupted_step"] = np.int64(step)
         self._file.attrs["interrupted_by"] = signal_name
 
-    def close(self, status: str = "completed") -> None:
-        """Collective: write the remaining steps, set the final status, close.
+    def close(self, status: str = "completed") -> str:
+        """Collective: write the remaining steps, set the final status, close;
+        returns the status written.
 
-        A recorded error keeps status 'failed' whatever ``status`` says.
-        Calling close twice is harmless.
+        A recorded error keeps status 'failed' whatever ``status`` says; a
+        completed run with warnings is 'completed_with_warnings'.  Calling
+        close twice is harmless.
         """
         if self._closed:
-            return
+            return self._final_status
         self._flush_steps()
         self._beat()
-        self._file.attrs["status"] = "failed" if self._error_recorded else str(status)
+        if status == "completed" and self.warnings():
+            status = "completed_with_warnings"
+        self._final_status = "failed" if self._error_recorded else str(status)
+        self._file.attrs["status"] = self._final_status
         self._file.attrs["frames_written"] = np.int64(self.frames_written)
         self._file.attrs["steps_written"] = np.int64(self.steps_written)
         self._file.close()
         self._closed = True
         self._write_xdmf()
+        return self._final_status
 
     @property
     def closed(self) -> bool:

@@ -391,10 +391,40 @@ def _energy_png(res: dict, out: str) -> None:
     fig.savefig(out)
 
 
+def _reactions_png(res: dict, out: str) -> None:
+    """Each pin group's reaction (diagnostics reaction_<k>_x/y/z, the groups
+    named by the attribute grips) against time: a grip pulled at a constant
+    velocity draws its load-elongation curve."""
+    d = res["diagnostics"]
+    t = d.get("time", np.zeros(0))
+    names = list(res["attrs"].get("grips", []))
+    fig = Figure(figsize=(8, 4.6), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    curves = {(k, c): d.get(f"reaction_{k}_{c}") for k in range(len(names)) for c in "xyz"}
+    largest = max((float(np.nanmax(np.abs(y))) for y in curves.values() if _finite(y)),
+                  default=0.0)
+    for k, name in enumerate(names):
+        for c, style in zip("xyz", ("-", "--", ":")):
+            y = curves[k, c]
+            # components at round-off of the largest are left out
+            if _finite(y) and np.nanmax(np.abs(y)) > 1e-9 * largest:
+                ax.plot(t, y, style, color=f"C{k % 10}", lw=1.2, label=f"{name} {c}")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("reaction [N]")
+    ax.set_title(f"{res['attrs'].get('scene', '')}: reaction force of each pin group",
+                 fontsize=10)
+    if ax.lines:
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out)
+
+
 def write_previews(h5_path: str | os.PathLike, out_dir: str | os.PathLike | None = None,
                    max_triangles: int = MAX_PREVIEW_TRIANGLES) -> list[str]:
     """Write ``<stem>_frames.png`` (if any frame was written), ``<stem>_views.png``
-    (if also a mesh collider is in the file) and ``<stem>_energy.png`` next to
+    (if also a mesh collider is in the file), ``<stem>_energy.png`` and
+    ``<stem>_reactions.png`` (if the run recorded pin-group reactions) next to
     the file (or in ``out_dir``); return their paths.
 
     Serial: call on one rank only (rank 0), after the writer is closed.
@@ -417,4 +447,8 @@ def write_previews(h5_path: str | os.PathLike, out_dir: str | os.PathLike | None
     path = os.path.join(folder, f"{stem}_energy.png")
     _energy_png(res, path)
     written.append(path)
+    if "reaction_0_x" in res["diagnostics"]:
+        path = os.path.join(folder, f"{stem}_reactions.png")
+        _reactions_png(res, path)
+        written.append(path)
     return written

@@ -13,7 +13,8 @@ from ..physics.bending import hinges
 from ..physics.bending_shell import shell_jump_stencils, shell_stencils
 from . import grid as gridlib
 from .meshio import MeshFormatError, read_mesh
-from .pins import select_pin_axes, select_pins
+from .grips import Loads, group_of_vertices, piece_grips, piece_loads, start_velocities
+from .pins import select_one, select_pin_axes, select_pins
 from .placement import place
 from .weld_vertices import count_parts, weld_coincident
 from .garment import (Garment, body_meshes, check_garment_start, garment_arrays,
@@ -41,6 +42,8 @@ class _Piece:
     garment: Garment | None = None    # pattern pieces: grain, stitches, fused regions
     file_index: np.ndarray | None = None   # welded file meshes: new index of each file vertex
     notes: list[str] = field(default_factory=list)   # what loading it changed or found
+    pin_sets: list = field(default_factory=list)      # each pins entry's piece-local vertices
+    load_sets: list = field(default_factory=list)     # each loads entry's piece-local vertices
 
 
 def build_model(cfg: SceneConfig) -> Model:
@@ -129,6 +132,15 @@ def build_model(cfg: SceneConfig) -> Model:
                  slide_vertices=slide_index.astype(np.int64), slide_axes=slide_axis,
                  pieces=infos, initial_positions=_start_noise(cfg, infos, positions, triangles))
     model.load_notes = [note for piece in pieces for note in piece.notes]
+    model.grips = [g for p, (spec, piece, o) in enumerate(zip(cfg.cloth, pieces, offsets))
+                   for g in piece_grips(spec, piece.pin_sets, piece.positions, o, f"cloth.{p}")]
+    model.pin_group = group_of_vertices(model.grips, model.num_vertices)
+    loads = [piece_loads(spec, piece.load_sets, piece.positions, piece.triangles, o,
+                         f"cloth.{p}")
+             for p, (spec, piece, o) in enumerate(zip(cfg.cloth, pieces, offsets))]
+    model.loads = Loads(*(np.concatenate([getattr(x, name) for x in loads])
+                          for name in ("vertices", "forces", "ramps")))
+    model.initial_velocities = start_velocities(cfg, model)
     uvs = scene_uvs(cfg, infos)
     if uvs is not None:
         model.uv, model.uv_index = uvs
@@ -196,6 +208,14 @@ def _build_piece(p: int, spec: ClothSpec, bending_active: bool, cfg: SceneConfig
         pins = tuple(_welded_pin(pin, piece.file_index, f"{key}.pins.{i}")
                      for i, pin in enumerate(pins))
     piece.pinned = select_pins(pins, piece.positions, piece.grid_resolution, f"{key}.pins")
+    piece.pin_sets = [select_one(pin, piece.positions, piece.grid_resolution, f"{key}.pins.{i}")
+                      for i, pin in enumerate(pins)]
+    loads = spec.loads
+    if piece.file_index is not None:
+        loads = tuple(_welded_pin(load, piece.file_index, f"{key}.loads.{i}")
+                      for i, load in enumerate(loads))
+    piece.load_sets = [select_one(load, piece.positions, piece.grid_resolution,
+                                  f"{key}.loads.{i}") for i, load in enumerate(loads)]
     piece.slide_index, piece.slide_axis = select_pin_axes(pins, piece.positions,
                                                           piece.grid_resolution, f"{key}.pins")
     return piece
@@ -240,7 +260,7 @@ def _check_collider_files(cfg: SceneConfig) -> None:
 
 
 def _welded_pin(pin, file_index: np.ndarray, key: str):
-    """``pin`` with its file vertex indices moved to the welded mesh's."""
+    """``pin`` (or a load) with its file vertex indices moved to the welded mesh's."""
     if pin.indices is None:
         return pin
     indices = np.asarray(pin.indices, dtype=np.int64)

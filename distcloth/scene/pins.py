@@ -1,4 +1,5 @@
-"""Pinned vertices of one piece from its PinSpec list (docs/config.md)."""
+"""Pinned vertices of one piece from its PinSpec list, and the vertex selectors
+that pins and loads share (docs/config.md)."""
 from __future__ import annotations
 
 import numpy as np
@@ -16,7 +17,7 @@ def select_pins(pins, positions: np.ndarray, grid_resolution, key: str) -> np.nd
     for k, pin in enumerate(pins):
         if pin.axis is not None:          # sliding pins: select_pin_axes
             continue
-        chosen.append(_select_one(pin, positions, grid_resolution, f"{key}.{k}"))
+        chosen.append(select_one(pin, positions, grid_resolution, f"{key}.{k}"))
     return np.unique(np.concatenate(chosen))
 
 
@@ -27,14 +28,15 @@ def select_pin_axes(pins, positions, grid_resolution, key: str):
     for k, pin in enumerate(pins):
         if pin.axis is None:
             continue
-        sel = _select_one(pin, positions, grid_resolution, f"{key}.{k}")
+        sel = select_one(pin, positions, grid_resolution, f"{key}.{k}")
         a = np.asarray(pin.axis, float) / np.linalg.norm(pin.axis)
         idx.append(sel)
         axes.append(np.tile(a, (sel.shape[0], 1)))
     return np.concatenate(idx), np.concatenate(axes)
 
 
-def _select_one(pin: PinSpec, positions, grid_resolution, key: str) -> np.ndarray:
+def select_one(pin: PinSpec, positions, grid_resolution, key: str) -> np.ndarray:
+    """The piece-local vertices one selector (a pin or a load) chooses."""
     n = positions.shape[0]
     if pin.edge is not None or pin.corner is not None:
         what = "edge" if pin.edge is not None else "corner"

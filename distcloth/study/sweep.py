@@ -43,9 +43,10 @@ from ..config.describe import entry
 from ..config.schema import LIMIT_METHODS, SceneConfig, TimeSpec
 from ..io.console import Progress
 from ..io.h5read import read_attrs
+from ..io.h5writer import FINISHED
 from ..linalg.presets import PRECONDITIONERS
 from ..run import open_writer, setup, write_steps
-from ..simulation import DIAGNOSTICS, SimulationError
+from ..simulation import SimulationError
 
 def _pc_overrides(options: dict, mat_type: str) -> dict:
     """One preset as scene overrides: pc_type, the matrix type where it is not
@@ -261,6 +262,8 @@ def finished(path: str) -> tuple[bool, str, float]:
         return False, "", math.nan
     status = attrs.get("status", "")
     wall = attrs.get(WALL_ATTR)
+    if status in FINISHED:       # a study judges the energy itself: warnings are its data
+        status = "completed"
     if status in ("completed", "failed") and wall is not None:
         return True, status, float(wall)
     return False, status, math.nan
@@ -317,7 +320,7 @@ def run_variant(cfg, comm, path: str, *, perturb: float = 0.0, progress: bool = 
     h = cfg.time.step
     n_steps = max(1, int(round(cfg.time.end / h)))
     every = max(1, int(round(cfg.output.every / h)))
-    writer = open_writer(sim, cfg, comm, path, list(DIAGNOSTICS),
+    writer = open_writer(sim, cfg, comm, path, sim.diagnostic_names(),
                          {"steps": n_steps, "output_every_steps": every, "study_perturb": perturb})
     sim.pipeline.run("output", writer)
     sim.pipeline.take_step_counters()
