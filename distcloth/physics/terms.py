@@ -9,8 +9,8 @@ import numpy as np
 
 from ..model import FLEXION, SHEAR, STRUCTURAL
 from . import springs as sk
-from .base import ForceTerm, local_elements
-from .bending import DihedralBendingTerm, IsometricBendingTerm
+from .base import ForceTerm, TermSum, local_elements
+from .bending import DihedralBendingTerm, FlexionLineTerm, IsometricBendingTerm
 from .bending_shell import JUMP_GAMMA, ShellDihedralBendingTerm, ShellIsometricBendingTerm
 from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress, with_compression
 
@@ -165,7 +165,7 @@ def build_membrane(cfg, model, layout) -> ForceTerm:
 def build_bending(cfg, model, layout) -> ForceTerm:
     kind = cfg.cloth[0].material.bending_kind
     if kind == "flexion":
-        return LocalSprings(model, layout).term("force:bending", [FLEXION])
+        return _flexion_bending(cfg, model, layout)
     return _hinge_bending(cfg, model, layout, kind)
 
 
@@ -203,6 +203,34 @@ def _fem_membrane(model, layout, material):
             tables[:2] = [with_compression(t, material.compression) for t in tables[:2]]
     return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables,
                            rest_corners=corners, scale=scale)
+
+
+def _flexion_bending(cfg, model, layout):
+    """Mass-spring bending: the flexion line elements of grid pieces
+    (``FlexionLineTerm``) and the flexion springs of the other pieces (mesh
+    files and garments, whose springs span interior edges)."""
+    springs = LocalSprings(model, layout)
+    lines = model.flexion_lines
+    if lines is None or lines.shape[0] == 0:
+        return springs.term("force:bending", [FLEXION])
+    local, weight, ids = local_elements(lines[:, [0, 2, 1, 1]], layout)
+    piece_B = np.array([spec.material.bending for spec in cfg.cloth])
+    mid = lines[ids, 1]
+    line_term = FlexionLineTerm(local[:, [0, 2, 1]], model.rest_positions[layout.local_input],
+                                piece_B[model.per_vertex(np.arange(len(model.pieces)))[mid]],
+                                model.vertex_area[mid], weight)
+    # the grid flexion springs (first, last) stay in the model for damping only
+    n = np.int64(model.num_vertices)
+    ends = np.sort(lines[:, [0, 2]], axis=1)
+    pairs = np.sort(model.spring_vertices[springs.ids], axis=1)
+    on_line = np.isin(pairs[:, 0] * n + pairs[:, 1], ends[:, 0] * n + ends[:, 1])
+    other = (springs.kind == FLEXION) & ~on_line
+    if not other.any():
+        return line_term
+    spring_term = SpringTerm("force:bending", springs.ends[other], springs.rest[other],
+                             springs.stiffness[other], springs.weight[other],
+                             np.zeros(int(other.sum()), dtype=bool))
+    return TermSum("force:bending", [line_term, spring_term])
 
 
 def _hinge_bending(cfg, model, layout, kind):
