@@ -104,9 +104,9 @@ def test_a_plain_flexion_spring_has_no_linear_bending_stiffness():
 
 def test_grid_and_mesh_file_pieces_together(tmp_path):
     """A mass-spring scene with a grid (flexion line elements) and a mesh file
-    (flexion springs across its interior edges) has one bending stage holding
-    both; it is at rest in the rest shape and both kinds bend (energy > 0 once
-    the pieces droop)."""
+    (dihedral angles on its hinges) has one bending stage holding both; it is
+    at rest in the rest shape and both kinds bend (energy > 0 once the pieces
+    droop)."""
     from distcloth.physics.base import TermSum
     from distcloth.scene.meshio import write_obj
     from test_physics import grid_scene, make_sim
@@ -128,6 +128,6 @@ def test_grid_and_mesh_file_pieces_together(tmp_path):
     for _ in range(5):
         sim.step()
     x1 = sim.state.x
-    line, spring = term.parts
-    assert line.energy(x1) > 0 and spring.energy(x1) > 0
+    line, hinge = term.parts
+    assert line.energy(x1) > 0 and hinge.energy(x1) > 0
     sim.destroy()

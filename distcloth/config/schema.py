@@ -179,7 +179,7 @@ class MaterialSpec:
     weft: Vec3 = setting((1.0, 0.0, 0.0), doc="weft direction in the placed rest shape "
                          "(projected on each triangle)", nonzero=True)
     bending_model: str | None = choice(None, BENDING_MODELS, doc="null: flexion for mass_spring "
-                                       "(its only model: line elements on grids, springs on mesh "
+                                       "(its only model: line elements on grids, hinges on mesh "
                                        "files), dihedral for fem; the models are compared under "
                                        "Bending models below and in docs/fidelity.md")
     preset: str | None = choice(None, tuple(FABRICS), doc="a named fabric "

@@ -207,30 +207,38 @@ def _fem_membrane(model, layout, material):
 
 def _flexion_bending(cfg, model, layout):
     """Mass-spring bending: the flexion line elements of grid pieces
-    (``FlexionLineTerm``) and the flexion springs of the other pieces (mesh
-    files and garments, whose springs span interior edges)."""
+    (``FlexionLineTerm``), dihedral angles on the hinges of mesh files (their
+    flexion springs, across the same hinges, span the same pairs), and the
+    flexion springs of whatever has neither (garment panels)."""
     springs = LocalSprings(model, layout)
-    lines = model.flexion_lines
-    if lines is None or lines.shape[0] == 0:
-        return springs.term("force:bending", [FLEXION])
-    local, weight, ids = local_elements(lines[:, [0, 2, 1, 1]], layout)
     piece_B = np.array([spec.material.bending for spec in cfg.cloth])
-    mid = lines[ids, 1]
-    line_term = FlexionLineTerm(local[:, [0, 2, 1]], model.rest_positions[layout.local_input],
-                                piece_B[model.per_vertex(np.arange(len(model.pieces)))[mid]],
-                                model.vertex_area[mid], weight)
-    # the grid flexion springs (first, last) stay in the model for damping only
+    piece_of_vertex = model.per_vertex(np.arange(len(model.pieces)))
+    rest = model.rest_positions[layout.local_input]
+    parts, covered = [], []
+    if model.flexion_lines is not None:
+        lines = model.flexion_lines
+        local, weight, ids = local_elements(lines[:, [0, 2, 1, 1]], layout)
+        mid = lines[ids, 1]
+        parts.append(FlexionLineTerm(local[:, [0, 2, 1]], rest, piece_B[piece_of_vertex[mid]],
+                                     model.vertex_area[mid], weight))
+        covered.append(lines[:, [0, 2]])        # the grid flexion pairs: damping only
+    if model.flexion_hinges is not None:
+        hg = model.flexion_hinges
+        local, weight, ids = local_elements(hg, layout)
+        parts.append(DihedralBendingTerm(local, rest, piece_B[piece_of_vertex[hg[ids, 0]]],
+                                         weight))
+        covered.append(hg[:, 2:])               # the wing pairs: the mesh flexion springs
     n = np.int64(model.num_vertices)
-    ends = np.sort(lines[:, [0, 2]], axis=1)
     pairs = np.sort(model.spring_vertices[springs.ids], axis=1)
-    on_line = np.isin(pairs[:, 0] * n + pairs[:, 1], ends[:, 0] * n + ends[:, 1])
-    other = (springs.kind == FLEXION) & ~on_line
-    if not other.any():
-        return line_term
-    spring_term = SpringTerm("force:bending", springs.ends[other], springs.rest[other],
-                             springs.stiffness[other], springs.weight[other],
-                             np.zeros(int(other.sum()), dtype=bool))
-    return TermSum("force:bending", [line_term, spring_term])
+    other = springs.kind == FLEXION
+    if covered:
+        ends = np.sort(np.concatenate(covered), axis=1)
+        other &= ~np.isin(pairs[:, 0] * n + pairs[:, 1], ends[:, 0] * n + ends[:, 1])
+    if other.any() or not parts:
+        parts.append(SpringTerm("force:bending", springs.ends[other], springs.rest[other],
+                                springs.stiffness[other], springs.weight[other],
+                                np.zeros(int(other.sum()), dtype=bool)))
+    return parts[0] if len(parts) == 1 else TermSum("force:bending", parts)
 
 
 def _hinge_bending(cfg, model, layout, kind):

@@ -42,6 +42,7 @@ class _Piece:
     file_index: np.ndarray | None = None   # welded file meshes: new index of each file vertex
     notes: list[str] = field(default_factory=list)   # what loading it changed or found
     flexion_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
+    flexion_hinges: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
 
 
 def build_model(cfg: SceneConfig) -> Model:
@@ -58,7 +59,9 @@ def build_model(cfg: SceneConfig) -> Model:
     Mass-spring grids with the ``bending`` effect on get flexion line
     elements (three consecutive vertices along u or v: physics/bending.py,
     ``FlexionLineTerm``); they carry no in-plane stiffness, so the structural
-    springs are the same with bending on or off."""
+    springs are the same with bending on or off.  Mass-spring mesh files
+    (consistently oriented) bend by dihedral angles on their hinges
+    (``flexion_hinges``); garment panels keep flexion springs."""
     if not cfg.cloth:
         raise ConfigError("cloth", [], "at least one cloth piece")
     bending_active = cfg.has("bending")
@@ -86,6 +89,7 @@ def build_model(cfg: SceneConfig) -> Model:
     kind = np.concatenate([piece.kind for piece in pieces])
     pinned = np.unique(np.concatenate([piece.pinned + o for piece, o in zip(pieces, offsets)]))
     flexion_lines = np.concatenate([piece.flexion_lines + o for piece, o in zip(pieces, offsets)])
+    flexion_hinges = np.concatenate([piece.flexion_hinges + o for piece, o in zip(pieces, offsets)])
     slide_index = np.concatenate([piece.slide_index + o for piece, o in zip(pieces, offsets)])
     slide_axis = np.concatenate([piece.slide_axis for piece in pieces])
     # a fully pinned vertex stays fully pinned; a vertex sliding along two axes is pinned
@@ -123,6 +127,8 @@ def build_model(cfg: SceneConfig) -> Model:
                  hinge_vertices=hinge_vertices, shell_stencil=shell_stencil,
                  shell_present=shell_present, shell_jump_stencil=shell_jump,
                  flexion_lines=flexion_lines.astype(np.int64) if flexion_lines.shape[0] else None,
+                 flexion_hinges=(flexion_hinges.astype(np.int64) if flexion_hinges.shape[0]
+                                 else None),
                  vertex_mass=vertex_mass, vertex_area=vertex_area,
                  spring_vertices=springs.astype(np.int64), spring_rest_length=rest_length,
                  spring_stiffness=stiffness, spring_damping=damping,
@@ -186,6 +192,11 @@ def _build_piece(p: int, spec: ClothSpec, bending_active: bool, cfg: SceneConfig
         piece = _grid_piece(spec, bending_active, key)
     elif mesh.file is not None:
         piece = _file_piece(spec, key)
+        if bending_active:
+            try:     # mass-spring bending by dihedral angles on the file's hinges
+                piece.flexion_hinges = hinges(piece.triangles)
+            except ValueError:
+                pass     # not consistently oriented: its flexion springs bend it
     elif mesh.pattern is not None:
         garment = pattern_piece_of(spec, p, cfg, bodies)
         piece = _triangle_piece(spec, garment.positions, garment.triangles)
