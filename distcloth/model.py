@@ -47,6 +47,10 @@ class Model:
     shell_stencil: np.ndarray | None = None       # (nt, 6) triangle + opposite vertices (shell bending)
     shell_present: np.ndarray | None = None       # (nt, 3) bool: the triangle's hinge i exists
     shell_jump_stencil: np.ndarray | None = None  # (ne, 12) neighbour pairs (curvature-jump penalty)
+    flexion_lines: np.ndarray | None = None       # (nf, 3) grid lines (first, middle, last) of the
+    #   mass-spring flexion element (physics/bending.py, FlexionLineTerm)
+    flexion_hinges: np.ndarray | None = None      # (nh, 4) hinges of mass-spring mesh files (bending
+    #   by dihedral angles there; their flexion springs stay for damping)
     slide_vertices: np.ndarray | None = None      # (ns,) vertices held only along an axis
     slide_axes: np.ndarray | None = None          # (ns, 3) unit axes
     # garments (distcloth/garment): what a mesh sewn from flat panels needs
@@ -124,6 +128,10 @@ class Model:
             stencils.append(self.shell_stencil)
         if self.shell_jump_stencil is not None:
             stencils.append(self.shell_jump_stencil)
+        if self.flexion_lines is not None:
+            stencils.append(self.flexion_lines)
+        if self.flexion_hinges is not None:
+            stencils.append(self.flexion_hinges)
         for el in stencils:
             nb = el.shape[1]
             for a in range(nb):

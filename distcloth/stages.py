@@ -66,7 +66,9 @@ STEP_STAGES: tuple[Stage, ...] = (
           "the seam lines of a sewn garment: springs along its seams, shorter than the fabric "
           "they join by the seam shrinkage", effect="membrane", build=build_seams),
     Stage("force:bending", "effect bending", "x", "forces, stiffness blocks",
-          "flexion springs or hinge / shell bending", effect="bending", build=build_bending),
+          "mass-spring: flexion line elements (grids), hinges (mesh files), flexion springs "
+          "(garment panels); fem: hinge or shell bending",
+          effect="bending", build=build_bending),
     Stage("force:sewing", "a garment whose stitches are not yet welded", "x, t",
           "forces, stiffness blocks", "stitch springs whose rest length goes from the start gap "
           "to zero over the sewing duration", build=build_sewing),

@@ -73,16 +73,17 @@ def stiffness_for(load):
 
 # ------------------------------------------------------------------ meshes
 
-def strip_mesh(h, width=W, seed=0, jitter=0.3):
-    """Delaunay mesh of [-h, L] x [0, width]: a jittered square lattice of
-    spacing ~h, Delaunay-triangulated, counter-clockwise (normals +z).  The
-    clamp columns x = -h, x = 0 and the tip column x = L keep their x exactly;
-    boundary vertices slide along their edge only."""
+def strip_mesh(h, width=W, seed=0, jitter=0.3, length=L, clamp=None):
+    """Delaunay mesh of [-clamp, length] x [0, width] (clamp defaults to h): a
+    jittered square lattice of spacing ~h, Delaunay-triangulated,
+    counter-clockwise (normals +z).  The clamp columns x = -clamp, x = 0 and
+    the tip column x = length keep their x exactly; boundary vertices slide
+    along their edge only."""
     rng = np.random.default_rng(seed)
-    nx = int(round(L / h))
+    nx = int(round(length / h))
     ny = max(2, int(round(width / h)))
-    dx, dy = L / nx, width / ny
-    xs = np.concatenate([[-h], np.arange(nx + 1) * dx])
+    dx, dy = length / nx, width / ny
+    xs = np.concatenate([[-(h if clamp is None else clamp)], np.arange(nx + 1) * dx])
     pts = []
     for i, x0 in enumerate(xs):
         for j in range(ny + 1):

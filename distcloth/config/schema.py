@@ -239,8 +239,9 @@ class MaterialSpec:
     weft: Vec3 = setting((1.0, 0.0, 0.0), doc="weft direction in the placed rest shape "
                          "(projected on each triangle)", nonzero=True)
     bending_model: str | None = choice(None, BENDING_MODELS, doc="null: flexion for mass_spring "
-                                       "(springs, its only model), dihedral for fem; the hinge "
-                                       "models are compared under Bending models below")
+                                       "(its only model: line elements on grids, hinges on mesh "
+                                       "files), dihedral for fem; the models are compared under "
+                                       "Bending models below and in docs/fidelity.md")
     preset: str | None = choice(None, tuple(FABRICS), doc="a named fabric "
                                 "(distcloth/config/fabrics.py; values illustrative, no "
                                 "measured source): implies model: fem, every key given "
@@ -273,9 +274,10 @@ class MaterialSpec:
     def bending_kind(self) -> str:
         if self.bending_model is not None:
             return self.bending_model
-        # dihedral, not dihedral_shell: the shell model is the accurate one (within
-        # 1 % of the elastica on every mesh family, per-hinge sums +6..17 %) but a
-        # step costs 8x at 100k vertices (docs/benchmarks.md); the user chooses
+        # dihedral, not dihedral_shell: the shell model is the accurate one (Peirce
+        # bending length within 2 % on every mesh kind, per-hinge sums 1-6 % short,
+        # docs/fidelity.md) but a step costs 3.2-3.5x at 10k vertices and 4.5-9x at
+        # 100k, nearly all in the solve (docs/benchmarks.md); the user chooses
         return "flexion" if self.model == "mass_spring" else "dihedral"
 
     @property

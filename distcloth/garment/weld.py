@@ -197,6 +197,8 @@ def weld_model(model: Model, x: np.ndarray, v: np.ndarray, material: SeamMateria
         hinge_rest=hinge_rest if model.hinge_vertices is not None else None,
         hinge_scale=hinge_scale if model.hinge_vertices is not None else None,
         shell_stencil=None, shell_present=None, shell_jump_stencil=None,
+        flexion_lines=None if model.flexion_lines is None else new_of[model.flexion_lines],
+        flexion_hinges=None if model.flexion_hinges is None else new_of[model.flexion_hinges],
         slide_vertices=slide_v, slide_axes=slide_a,
         grips=grips, pin_group=group_of_vertices(grips, first.shape[0]), loads=loads,
         triangle_weft=None if model.triangle_weft is None else model.triangle_weft[keep],

@@ -56,3 +56,37 @@ def local_elements(elements: np.ndarray, layout):
     if np.any(el[keep] < 0):      # the ghost layer covers every matrix-graph neighbour
         raise RuntimeError("an element with an owned vertex reaches beyond the ghost layer")
     return el[keep], owned[keep].sum(axis=1) / elements.shape[1], np.nonzero(keep)[0]
+
+
+class TermSum(ForceTerm):
+    """Several terms acting as one stage (e.g. mass-spring bending: flexion
+    line elements on grids and flexion springs on the other pieces)."""
+
+    def __init__(self, name, parts):
+        self.name = name
+        self.parts = list(parts)
+
+    def stencils(self):
+        return [st for part in self.parts for st in part.stencils()]
+
+    def bind(self, pattern):
+        for part in self.parts:
+            part.bind(pattern)
+
+    def evaluate(self, x, v, force, want_jac):
+        for part in self.parts:
+            part.evaluate(x, v, force, want_jac)
+
+    def stiffness_product(self, w, out):
+        for part in self.parts:
+            part.stiffness_product(w, out)
+
+    def add_to_system(self, data, alpha, beta):
+        for part in self.parts:
+            part.add_to_system(data, alpha, beta)
+
+    def energy(self, x):
+        return sum(part.energy(x) for part in self.parts)
+
+    def max_strain(self, x):
+        return max((part.max_strain(x) for part in self.parts), default=0.0)

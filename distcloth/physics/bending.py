@@ -588,6 +588,43 @@ class IsometricBendingTerm(_HingeTerm):
         return 0.5 * float(np.sum(self.coef * np.einsum("hc,hc->h", s, s) * self.weight))
 
 
+class FlexionLineTerm(IsometricBendingTerm):
+    """Mass-spring bending on grid lines (the flexion stencils: three
+    consecutive vertices first, middle, last of a grid row or column):
+
+        E = 1/2 k |x_first + x_last - 2 x_mid|^2,   k = B A_mid / a^4,
+
+    a the rest spacing along the line, A_mid the middle vertex's lumped area.
+    The second difference is a^2 kappa n + O(a^4) for a line bent to
+    curvature kappa, so E = 1/2 B kappa^2 A_mid: the continuum energy of a
+    bend along the grid axis (what Kawabata's B measures), exactly to leading
+    order.  Why not a spring between first and last (Provot 1995's flexion
+    spring): its length changes only by a^3 kappa^2 / 4, so it resists
+    bending at O(kappa^4) and has no linear bending stiffness at all.  The
+    element is the isometric model of Bergou et al. 2006 on a 1-D stencil
+    (Volino and Magnenat-Thalmann 2006's linear bending): quadratic, rotation
+    invariant, zero for every affine map of the straight rest line (so it
+    adds no in-plane stiffness), constant exact Jacobian.  Limits: bends
+    along a grid diagonal get half the stiffness and twist none (the sum
+    over the two axes is B/2 (f_xx^2 + f_yy^2), not B/2 |K|^2); a curved rest
+    line is not at rest (as for the isometric hinges, ``rest_energy``).
+    Stencil rows (first, last, mid, mid), weights (1, 1, -2, 0), so the
+    isometric kernels apply as they are."""
+
+    def __init__(self, lines, rest, stiffness, mid_area, weight):
+        lines = np.ascontiguousarray(lines, dtype=np.int64).reshape(-1, 3)
+        self.hinges = np.ascontiguousarray(lines[:, [0, 2, 1, 1]])
+        ne = self.hinges.shape[0]
+        self.B = _per_hinge(stiffness, ne)
+        self.weight = _per_hinge(weight, ne)
+        x = np.asarray(rest, dtype=np.float64)
+        a = 0.5 * np.linalg.norm(x[lines[:, 2]] - x[lines[:, 0]], axis=1)
+        self.kvec = np.ascontiguousarray(np.tile([1.0, 1.0, -2.0, 0.0], (ne, 1)))
+        self.coef = np.ascontiguousarray(self.B * _per_hinge(mid_area, ne) / a ** 4)
+        self.rest_energy = self.energy(x)
+        self.slots = None
+
+
 class DihedralBendingTerm(_HingeTerm):
     """Dihedral-angle bending (Bridson et al. 2003; EG07 tutorial, Part 1 §4.3, Fig. 11 b).
 

@@ -9,8 +9,8 @@ import numpy as np
 
 from ..model import FLEXION, SHEAR, STRUCTURAL
 from . import springs as sk
-from .base import ForceTerm, local_elements
-from .bending import DihedralBendingTerm, IsometricBendingTerm
+from .base import ForceTerm, TermSum, local_elements
+from .bending import DihedralBendingTerm, FlexionLineTerm, IsometricBendingTerm
 from .bending_shell import JUMP_GAMMA, ShellDihedralBendingTerm, ShellIsometricBendingTerm
 from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress, with_compression
 
@@ -165,7 +165,7 @@ def build_membrane(cfg, model, layout) -> ForceTerm:
 def build_bending(cfg, model, layout) -> ForceTerm:
     kind = cfg.cloth[0].material.bending_kind
     if kind == "flexion":
-        return LocalSprings(model, layout).term("force:bending", [FLEXION])
+        return _flexion_bending(cfg, model, layout)
     return _hinge_bending(cfg, model, layout, kind)
 
 
@@ -203,6 +203,42 @@ def _fem_membrane(model, layout, material):
             tables[:2] = [with_compression(t, material.compression) for t in tables[:2]]
     return MembraneFEMTerm(tris, rest, weft, C, material.strain, weight, tables=tables,
                            rest_corners=corners, scale=scale)
+
+
+def _flexion_bending(cfg, model, layout):
+    """Mass-spring bending: the flexion line elements of grid pieces
+    (``FlexionLineTerm``), dihedral angles on the hinges of mesh files (their
+    flexion springs, across the same hinges, span the same pairs), and the
+    flexion springs of whatever has neither (garment panels)."""
+    springs = LocalSprings(model, layout)
+    piece_B = np.array([spec.material.bending for spec in cfg.cloth])
+    piece_of_vertex = model.per_vertex(np.arange(len(model.pieces)))
+    rest = model.rest_positions[layout.local_input]
+    parts, covered = [], []
+    if model.flexion_lines is not None:
+        lines = model.flexion_lines
+        local, weight, ids = local_elements(lines[:, [0, 2, 1, 1]], layout)
+        mid = lines[ids, 1]
+        parts.append(FlexionLineTerm(local[:, [0, 2, 1]], rest, piece_B[piece_of_vertex[mid]],
+                                     model.vertex_area[mid], weight))
+        covered.append(lines[:, [0, 2]])        # the grid flexion pairs: damping only
+    if model.flexion_hinges is not None:
+        hg = model.flexion_hinges
+        local, weight, ids = local_elements(hg, layout)
+        parts.append(DihedralBendingTerm(local, rest, piece_B[piece_of_vertex[hg[ids, 0]]],
+                                         weight))
+        covered.append(hg[:, 2:])               # the wing pairs: the mesh flexion springs
+    n = np.int64(model.num_vertices)
+    pairs = np.sort(model.spring_vertices[springs.ids], axis=1)
+    other = springs.kind == FLEXION
+    if covered:
+        ends = np.sort(np.concatenate(covered), axis=1)
+        other &= ~np.isin(pairs[:, 0] * n + pairs[:, 1], ends[:, 0] * n + ends[:, 1])
+    if other.any() or not parts:
+        parts.append(SpringTerm("force:bending", springs.ends[other], springs.rest[other],
+                                springs.stiffness[other], springs.weight[other],
+                                np.zeros(int(other.sum()), dtype=bool)))
+    return parts[0] if len(parts) == 1 else TermSum("force:bending", parts)
 
 
 def _hinge_bending(cfg, model, layout, kind):

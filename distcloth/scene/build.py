@@ -44,6 +44,8 @@ class _Piece:
     notes: list[str] = field(default_factory=list)   # what loading it changed or found
     pin_sets: list = field(default_factory=list)      # each pins entry's piece-local vertices
     load_sets: list = field(default_factory=list)     # each loads entry's piece-local vertices
+    flexion_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
+    flexion_hinges: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
 
 
 def build_model(cfg: SceneConfig) -> Model:
@@ -57,17 +59,17 @@ def build_model(cfg: SceneConfig) -> Model:
     2/3 of a cell, a checkerboard of masses the cloth does not have; for the
     regular pattern the two agree on interior vertices).
 
-    The flexion springs' in-plane stiffness is taken off the grid structural
-    springs only when the ``bending`` effect is on: the membrane and bending
-    terms act on separate spring kinds (physics.terms), so with bending off
-    the structural springs alone must carry the membrane stiffness."""
+    Mass-spring grids with the ``bending`` effect on get flexion line
+    elements (three consecutive vertices along u or v: physics/bending.py,
+    ``FlexionLineTerm``); they carry no in-plane stiffness, so the structural
+    springs are the same with bending on or off.  Mass-spring mesh files
+    (consistently oriented) bend by dihedral angles on their hinges
+    (``flexion_hinges``); garment panels keep flexion springs."""
     if not cfg.cloth:
         raise ConfigError("cloth", [], "at least one cloth piece")
     bending_active = cfg.has("bending")
     _check_one_continuum_material(cfg)
     _check_collider_files(cfg)
-    # continuum pieces keep their springs (unused by the fem terms) without the
-    # flexion correction, which belongs to the mass-spring model only
     garments = any(spec.mesh.pattern is not None for spec in cfg.cloth)
     bodies = (body_meshes(cfg) if garments and (cfg.garment.clearance > 0
                                                 or cfg.garment.start_check) else [])
@@ -89,6 +91,8 @@ def build_model(cfg: SceneConfig) -> Model:
     stiffness = np.concatenate([piece.stiffness for piece in pieces])
     kind = np.concatenate([piece.kind for piece in pieces])
     pinned = np.unique(np.concatenate([piece.pinned + o for piece, o in zip(pieces, offsets)]))
+    flexion_lines = np.concatenate([piece.flexion_lines + o for piece, o in zip(pieces, offsets)])
+    flexion_hinges = np.concatenate([piece.flexion_hinges + o for piece, o in zip(pieces, offsets)])
     slide_index = np.concatenate([piece.slide_index + o for piece, o in zip(pieces, offsets)])
     slide_axis = np.concatenate([piece.slide_axis for piece in pieces])
     # a fully pinned vertex stays fully pinned; a vertex sliding along two axes is pinned
@@ -125,6 +129,9 @@ def build_model(cfg: SceneConfig) -> Model:
     model = Model(rest_positions=positions, triangles=triangles.astype(np.int64),
                  hinge_vertices=hinge_vertices, shell_stencil=shell_stencil,
                  shell_present=shell_present, shell_jump_stencil=shell_jump,
+                 flexion_lines=flexion_lines.astype(np.int64) if flexion_lines.shape[0] else None,
+                 flexion_hinges=(flexion_hinges.astype(np.int64) if flexion_hinges.shape[0]
+                                 else None),
                  vertex_mass=vertex_mass, vertex_area=vertex_area,
                  spring_vertices=springs.astype(np.int64), spring_rest_length=rest_length,
                  spring_stiffness=stiffness, spring_damping=damping,
@@ -197,6 +204,11 @@ def _build_piece(p: int, spec: ClothSpec, bending_active: bool, cfg: SceneConfig
         piece = _grid_piece(spec, bending_active, key)
     elif mesh.file is not None:
         piece = _file_piece(spec, key)
+        if bending_active:
+            try:     # mass-spring bending by dihedral angles on the file's hinges
+                piece.flexion_hinges = hinges(piece.triangles)
+            except ValueError:
+                pass     # not consistently oriented: its flexion springs bend it
     elif mesh.pattern is not None:
         garment = pattern_piece_of(spec, p, cfg, bodies)
         piece = _triangle_piece(spec, garment.positions, garment.triangles)
@@ -285,12 +297,9 @@ def _grid_piece(spec: ClothSpec, bending_active: bool, key: str) -> _Piece:
     material = spec.material
     if material.model != "mass_spring":
         # springs are unused by the continuum terms: derive harmless constants
-        # (no shear, no flexion correction) rather than refuse fem on long cells
+        # (no shear) rather than refuse fem on long cells
         material = dataclasses.replace(material, shear=0.0, bending=0.0)
-    constants = grid_spring_constants(
-        material, dx, dy, key=f"{key}.material",
-        flexion_u=bending_active and families["flexion_u"].shape[0] > 0,
-        flexion_v=bending_active and families["flexion_v"].shape[0] > 0)
+    constants = grid_spring_constants(material, dx, dy, key=f"{key}.material")
     names = gridlib.GRID_SPRING_FAMILIES
     counts = [families[name].shape[0] for name in names]
     return _Piece(
@@ -300,7 +309,9 @@ def _grid_piece(spec: ClothSpec, bending_active: bool, key: str) -> _Piece:
         springs=np.concatenate([families[name] for name in names]),
         stiffness=np.repeat([constants[name] for name in names], counts),
         kind=np.repeat([_GRID_FAMILY_KIND[name] for name in names], counts).astype(np.int8),
-        pinned=np.zeros(0, dtype=np.int64), grid_resolution=resolution)
+        pinned=np.zeros(0, dtype=np.int64), grid_resolution=resolution,
+        flexion_lines=(gridlib.grid_flexion_lines(resolution) if bending_active
+                       else np.zeros((0, 3), dtype=np.int64)))
 
 
 def _triangle_lumped_area(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:

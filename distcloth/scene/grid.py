@@ -76,6 +76,7 @@ def grid_springs(resolution) -> dict[str, np.ndarray]:
     """Spring end pairs (m, 2) of each family in GRID_SPRING_FAMILIES."""
     nu, nv = resolution
     index = np.arange(nu * nv, dtype=np.int64).reshape(nv, nu)   # index[j, i]
+    lines = grid_flexion_lines(resolution)
 
     def pairs(first, second):
         return np.stack([first.ravel(), second.ravel()], axis=1)
@@ -85,9 +86,22 @@ def grid_springs(resolution) -> dict[str, np.ndarray]:
         "structural_v": pairs(index[:-1, :], index[1:, :]),
         "shear": np.concatenate([pairs(index[:-1, :-1], index[1:, 1:]),     # a-c
                                  pairs(index[:-1, 1:], index[1:, :-1])]),   # b-d
-        "flexion_u": pairs(index[:, :-2], index[:, 2:]),
-        "flexion_v": pairs(index[:-2, :], index[2:, :]),
+        **dict(zip(("flexion_u", "flexion_v"), np.split(lines[:, [0, 2]], [nv * (nu - 2)]))),
     }
+
+
+def grid_flexion_lines(resolution) -> np.ndarray:
+    """(m, 3) (first, middle, last) of every three consecutive vertices along
+    u, then along v: the flexion springs of ``grid_springs`` with their middle
+    vertex, in the same order (the mass-spring bending stencils)."""
+    nu, nv = resolution
+    index = np.arange(nu * nv, dtype=np.int64).reshape(nv, nu)
+
+    def lines(a, m, b):
+        return np.stack([a.ravel(), m.ravel(), b.ravel()], axis=1)
+
+    return np.concatenate([lines(index[:, :-2], index[:, 1:-1], index[:, 2:]),
+                           lines(index[:-2, :], index[1:-1, :], index[2:, :])])
 
 
 def grid_edge_vertices(resolution, edge: str) -> np.ndarray:

@@ -11,9 +11,6 @@ import numpy as np
 from ..config.schema import ConfigError, MaterialSpec
 from .meshio import MeshFormatError
 
-# A structural constant this small a fraction of its no-bending value means
-# the flexion springs carry nearly all of the in-plane stiffness.
-MIN_STRUCTURAL_FRACTION = 0.1
 # Twice a triangle's area below this times its longest edge squared counts
 # as zero: cross products carry rounding of about 1e-16 l^2.
 DEGENERATE_RELATIVE_AREA = 1e-12
@@ -31,7 +28,7 @@ def flexion_stiffness(bending: float, length):
 
 
 def grid_spring_constants(material: MaterialSpec, dx: float, dy: float, *,
-                          flexion_u: bool, flexion_v: bool, key: str) -> dict[str, float]:
+                          key: str) -> dict[str, float]:
     """Stiffness of each grid spring family (grid.GRID_SPRING_FAMILIES).
 
     Derivation (infinitesimal strain, interior of the grid).  A spring with rest
@@ -42,27 +39,25 @@ def grid_spring_constants(material: MaterialSpec, dx: float, dy: float, *,
 
       x structural, d = (dx, 0):     1/2 (k_x dx/dy)      e_xx^2
       y structural, d = (0, dy):     1/2 (k_y dy/dx)      e_yy^2
-      x flexion,    d = (2dx, 0):    1/2 (4 k_fx dx/dy)   e_xx^2
-      y flexion,    d = (0, 2dy):    1/2 (4 k_fy dy/dx)   e_yy^2
       two diagonals, d = (dx, +-dy), L_d^2 = dx^2 + dy^2, g = 2 k_d dx dy / L_d^2:
           1/2 g (dx/dy)^2 e_xx^2 + 1/2 g (dy/dx)^2 e_yy^2 + g e_xx e_yy + 2 g e_xy^2
 
     Matching W = 1/2 C (e_xx^2 + e_yy^2) + G e_xx e_yy + 2 G e_xy^2 term by term:
 
       k_d = G (dx^2 + dy^2) / (2 dx dy)
-      k_x = (C - G (dx/dy)^2) dy/dx - 4 k_fx,    k_fx = 4B / (2 dx)^2
-      k_y = (C - G (dy/dx)^2) dx/dy - 4 k_fy,    k_fy = 4B / (2 dy)^2
+      k_x = (C - G (dx/dy)^2) dy/dx,   k_y = (C - G (dy/dx)^2) dx/dy
 
     With C = (Y + sqrt(Y^2 + 4 G^2)) / 2 the uniaxial stiffness is
     C - G^2/C = Y.  On square cells this is docs/config.md's k_d = G,
-    k_s = C - G - 4 k_f.  It is exact on rectangular cells too (docs/config.md
-    scales only by dy/dx, which is exact for square cells alone); what stays
-    approximate is the boundary, where cells lack flexion springs and
-    neighbours, and bending itself (docs/config.md).
+    k_s = C - G.  It is exact on rectangular cells too; what stays
+    approximate is the boundary, where cells lack neighbours.
 
-    ``flexion_u`` / ``flexion_v``: whether flexion springs along u / v exist
-    (nu >= 3 / nv >= 3) and act (the bending effect is on); only then is their
-    in-plane stiffness taken off the structural springs.
+    The grid's bending is carried by the flexion line elements
+    (physics/bending.py, ``FlexionLineTerm``), which store nothing under an
+    in-plane affine strain, so the structural springs keep their whole
+    stiffness whatever B and the spacing.  The ``flexion_u`` / ``flexion_v``
+    constants k_f = 4B / (2 dx)^2 are kept for the flexion pairs' damping
+    (c = damping * k) only.
     """
     stretch, shear, bending = material.stretch, material.shear_stiffness, material.bending
     modulus = membrane_modulus(stretch, shear)
@@ -71,11 +66,10 @@ def grid_spring_constants(material: MaterialSpec, dx: float, dy: float, *,
         "flexion_u": float(flexion_stiffness(bending, 2.0 * dx)),
         "flexion_v": float(flexion_stiffness(bending, 2.0 * dy)),
     }
-    for axis, along, across, active in (("u", dx, dy, flexion_u), ("v", dy, dx, flexion_v)):
-        family = f"structural_{axis}"
+    for axis, along, across in (("u", dx, dy), ("v", dy, dx)):
         aspect = along / across
-        without_bending = (modulus - shear * aspect ** 2) * across / along
-        if without_bending <= 0.0:
+        stiffness = (modulus - shear * aspect ** 2) * across / along
+        if stiffness <= 0.0:
             # C(G) = G r^2 at G = Y r^2 / (r^4 - 1); only possible for r > 1
             largest = stretch * aspect ** 2 / (aspect ** 4 - 1.0)
             raise ConfigError(f"{key}.shear", shear,
@@ -83,16 +77,7 @@ def grid_spring_constants(material: MaterialSpec, dx: float, dy: float, *,
                               f"along {axis} and {across:g} m across: the {axis} structural "
                               f"springs would be non-positive; needs G < {largest:.3g} N/m "
                               f"(or squarer cells)")
-        flexion = 4.0 * constants[f"flexion_{axis}"] if active else 0.0
-        stiffness = without_bending - flexion
-        if stiffness <= MIN_STRUCTURAL_FRACTION * without_bending:
-            largest = (1.0 - MIN_STRUCTURAL_FRACTION) * without_bending * along * along / 4.0
-            raise ConfigError(f"{key}.bending", bending,
-                              f"bending too stiff for this grid: the flexion springs would "
-                              f"leave the {axis} structural springs under "
-                              f"{MIN_STRUCTURAL_FRACTION:.0%} of their stiffness; needs "
-                              f"B < {largest:.3g} N*m at this resolution (or a coarser grid)")
-        constants[family] = stiffness
+        constants[f"structural_{axis}"] = stiffness
     return constants
 
 
