@@ -22,8 +22,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config.load import config_from_dict
-from ..inprocess import agreed
 from . import quasistatic
 
 GAP = 0.01                         # m between the jaws
@@ -89,9 +87,8 @@ def run(material: dict, base_dir: str, comm, *, resolution: str = "standard") ->
     t0 = time.perf_counter()
     res = BendingResult()
     raw = scene(material, resolution)
-    cfg, err = agreed(comm, lambda: config_from_dict(raw, base_dir, "lab_kes_bending"))
-    if err:
-        res.reason, res.wall = err, time.perf_counter() - t0
+    cfg, res.reason = quasistatic.checked(raw, "lab_kes_bending", base_dir, comm)
+    if cfg is None:
         return res
     res.b_law = cfg.cloth[0].material.bending
     rows, res.reason = quasistatic.sweep(raw, "lab_kes_bending", base_dir, comm, INCREMENTS)

@@ -24,8 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config.load import config_from_dict
-from ..inprocess import agreed
 from . import quasistatic
 from .kes_tensile import CELLS, GAUGE, WIDTH, _direction_material
 from .units import GF_PER_CM
@@ -73,9 +71,8 @@ def run(material: dict, base_dir: str, comm, *, resolution: str = "standard") ->
     t0 = time.perf_counter()
     res = ShearResult()
     raw = scene(material, resolution)
-    cfg, err = agreed(comm, lambda: config_from_dict(raw, base_dir, "lab_kes_shear"))
-    if err:
-        res.reason, res.wall = err, time.perf_counter() - t0
+    cfg, res.reason = quasistatic.checked(raw, "lab_kes_shear", base_dir, comm)
+    if cfg is None:
         return res
     mat = cfg.cloth[0].material
     rows, res.reason = quasistatic.sweep(raw, "lab_kes_shear", base_dir, comm, INCREMENTS)

@@ -24,8 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config.load import config_from_dict
-from ..inprocess import agreed
 from . import quasistatic
 from .units import GF_PER_CM
 
@@ -109,10 +107,9 @@ def run_direction(material: dict, base_dir: str, comm, direction: str,
                   resolution: str) -> TensileResult:
     t0 = time.perf_counter()
     res = TensileResult(direction)
-    cfg, err = agreed(comm, lambda: config_from_dict(scene(material, direction, resolution, 0.1),
-                                                     base_dir, "lab_kes_tensile"))
-    if err:
-        res.reason, res.wall = err, time.perf_counter() - t0
+    cfg, res.reason = quasistatic.checked(scene(material, direction, resolution, 0.1),
+                                          "lab_kes_tensile", base_dir, comm)
+    if cfg is None:
         return res
     mat = cfg.cloth[0].material
     linear = mat.tension_weft is None and mat.tension_warp is None

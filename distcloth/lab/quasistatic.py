@@ -7,7 +7,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from ..inprocess import build_simulation
+from ..config.load import config_from_dict
+from ..inprocess import agreed, build_simulation
 from ..simulation import SimulationError
 
 STEP = 1.0          # s, one load increment
@@ -47,3 +48,9 @@ def sweep(raw: dict, name: str, base_dir: str, comm, steps: int,
         return rows, str(exc)
     finally:
         sim.destroy()
+
+
+def checked(raw: dict, name: str, base_dir: str, comm):
+    """Collective: (the scene's config, '') or (None, the agreed refusal)."""
+    cfg, err = agreed(comm, lambda: config_from_dict(raw, base_dir, name))
+    return cfg, err or ""

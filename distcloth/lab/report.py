@@ -65,30 +65,28 @@ def tensile_section(results) -> str:
     return "\n".join(out + ["", "; ".join(notes) + ".", ""])
 
 
+def _law_section(title: str, r, value, rows, increments: int) -> str:
+    """A test with one characteristic value, simulated against the law."""
+    if r.reason and math.isnan(value):
+        return f"### {title}\n\nnot measured: {r.reason}\n"
+    table = [f"| {name} | {_fmt(sim, spec)} | {_fmt(law, spec)} |" for name, sim, law, spec in rows]
+    return "\n".join([f"### {title}", "", "| quantity | simulated | material law |",
+                      "|---|---:|---:|", *table, "",
+                      f"{increments} increments, {r.wall:.1f} s"
+                      + (f" ({r.reason})" if r.reason else "") + ".", ""])
+
+
 def shear_section(r) -> str:
     from .kes_shear import kawabata_g
-    if r.reason and math.isnan(r.g):
-        return f"### KES-FB1 shear\n\nnot measured: {r.reason}\n"
-    return "\n".join([
-        "### KES-FB1 shear (20 cm × 5 cm, to 8°)", "",
-        "| quantity | simulated | material law |", "|---|---:|---:|",
-        f"| G (gf/cm/°) | {_fmt(kawabata_g(r.g), '.4f')} | {_fmt(kawabata_g(r.g_law), '.4f')} |",
-        f"| G (N/m) | {_fmt(r.g, '.2f')} | {_fmt(r.g_law, '.2f')} |", "",
-        f"{len(r.angle)} increments, {r.wall:.1f} s" + (f" ({r.reason})" if r.reason else "")
-        + ".", ""])
+    return _law_section("KES-FB1 shear (20 cm × 5 cm, to 8°)", r, r.g, [
+        ("G (gf/cm/°)", kawabata_g(r.g), kawabata_g(r.g_law), ".4f"),
+        ("G (N/m)", r.g, r.g_law, ".2f")], len(r.angle))
 
 
 def bending_section(r) -> str:
-    if r.reason and math.isnan(r.b):
-        return f"### KES-FB2 pure bending\n\nnot measured: {r.reason}\n"
-    return "\n".join([
-        "### KES-FB2 pure bending (jaws 1 cm apart, to 2.5 /cm)", "",
-        "| quantity | simulated | material law |", "|---|---:|---:|",
-        f"| B (gf·cm²/cm) | {_fmt(r.b / GF_CM2_PER_CM, '.4f')} | "
-        f"{_fmt(r.b_law / GF_CM2_PER_CM, '.4f')} |",
-        f"| B (µN·m) | {_fmt(1e6 * r.b, '.3f')} | {_fmt(1e6 * r.b_law, '.3f')} |", "",
-        f"{len(r.curvature) - 1} increments, {r.wall:.1f} s"
-        + (f" ({r.reason})" if r.reason else "") + ".", ""])
+    return _law_section("KES-FB2 pure bending (jaws 1 cm apart, to 2.5 /cm)", r, r.b, [
+        ("B (gf·cm²/cm)", r.b / GF_CM2_PER_CM, r.b_law / GF_CM2_PER_CM, ".4f"),
+        ("B (µN·m)", 1e6 * r.b, 1e6 * r.b_law, ".3f")], max(len(r.curvature) - 1, 0))
 
 
 SECTIONS = {"tensile": tensile_section, "shear": shear_section, "bending": bending_section,
