@@ -34,12 +34,13 @@ H = 0.01
 
 
 def sheet(h, end, integrator="implicit_midpoint", energy_momentum=True, newton=40,
-          strain="stvk", bending="isometric"):
-    """The swinging sheet (also run by scripts/energy_conservation.py)."""
+          strain="stvk", bending="isometric", tolerance=1e-10, **time):
+    """The swinging sheet (also run by scripts/energy_conservation.py; ``time``:
+    more time: keys)."""
     raw = grid_scene(effects=["gravity", "membrane", "bending"],
                      time={"end": end, "step": h, "integrator": integrator,
-                           "newton_iterations": newton, "newton_tolerance": 1e-10,
-                           "energy_guard": False, "energy_momentum": energy_momentum})
+                           "newton_iterations": newton, "newton_tolerance": tolerance,
+                           "energy_guard": False, "energy_momentum": energy_momentum, **time})
     raw["cloth"][0]["material"] = {"model": "fem", "density": 0.1, "E_weft": 10.0,
                                    "nu_weft": 0.3, "bending": 1e-6, "strain": strain,
                                    "bending_model": bending}
