@@ -29,7 +29,9 @@ x1 - x0 = h (v0 + v1)/2 the kinetic energy changes by exactly the work
 h f . (v0 + v1)/2 = -(U1 - U0): a converged step conserves energy to the Newton
 tolerance, and the scheme stays second order (the discrete gradient differs
 from f at the midpoint by O(|x1 - x0|^2)).  Newton's matrix is the midpoint
-Hessian (the discrete gradient's own derivative differs by O(h^2)).
+Hessian, which differs from the discrete gradient's own derivative by
+O(|x1 - x0|): Newton converges linearly, fast while the step moves the
+elements little against their size.
 """
 from __future__ import annotations
 
