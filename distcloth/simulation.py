@@ -182,7 +182,7 @@ class Simulation:
         by_name = {t.name: t for t in self.terms}
         for name in FORCE_STAGES:
             term = by_name.get(name)
-            bindings[name] = (term.evaluate if term else None, term is not None)
+            bindings[name] = (term.stage if term else None, term is not None)
         if self.contact.has_bodies:   # only scenes that name colliders have the stages
             bindings["collision:bodies"] = (self.contact.detect, True)
         if self.limiter is not None:

@@ -24,12 +24,14 @@ class StepContext:
         self.ghosts = ghosts
         self.comm = comm
 
-    def forces(self, x, v, want_jac: bool) -> np.ndarray:
+    def forces(self, x, v, want_jac: bool, start=None) -> np.ndarray:
         """Sum of the enabled force terms on every local row (each term is a stage);
-        with ``want_jac`` the terms keep what the system and products need."""
+        with ``want_jac`` the terms keep what the system and products need.
+        With ``start``: the force of a step from start to x, each term's
+        discrete gradient (``ForceTerm.evaluate_between``), v the midpoint's."""
         f = np.zeros((self.n_local, 3))
         for name in FORCE_STAGES:
-            self.pipeline.run(name, x, v, f, want_jac)
+            self.pipeline.run(name, x, v, f, want_jac, start)
         return f
 
     def stiffness_product(self, w) -> np.ndarray:

@@ -5,7 +5,10 @@
   (199,712 triangles): forces alone and forces + Hessian blocks, for both
   strain models, with and without the per-element PSD projection, on a
   gently stretched state (2 % + noise of 3 % of an edge) and a rough one
-  (noise of 30 % of an edge);
+  (noise of 30 % of an edge); and the discrete-gradient force of a step
+  between the state and a copy moved by noise of 1 % of an edge
+  (``evaluate_between`` without the Jacobian: the energy-momentum midpoint's
+  residual, integrate/implicit.py);
 * hinge bending (distcloth/physics/bending.py) on a 320 x 320-cell grid
   (306,560 hinges) rolled onto a cylinder with noise: ``evaluate`` (forces +
   Jacobian), ``stiffness_product``, ``add_to_system`` and ``energy`` of the
@@ -65,8 +68,8 @@ def membrane(reps):
     states = {"stretched 2 % + noise 3 % of an edge": 1.02 * x0 + 1e-4 * rng.normal(size=x0.shape),
               "rough: noise 30 % of an edge": 1.02 * x0 + 1e-3 * rng.normal(size=x0.shape)}
     print(f"FE membrane, {len(tris)} triangles, mean of {reps} calls (ms):\n")
-    print("| state | strain | PSD projection | forces | forces + Hessian |")
-    print("|---|---|---|---:|---:|")
+    print("| state | strain | PSD projection | forces | forces + Hessian | discrete gradient |")
+    print("|---|---|---|---:|---:|---:|")
     for (label, x), model, project in itertools.product(states.items(), ("stvk", "corotated"),
                                                          (False, True)):
         term = MembraneFEMTerm(tris, x0, None, C, model, np.ones(len(tris)), project=project)
@@ -76,7 +79,11 @@ def membrane(reps):
             raise SystemExit(f"membrane {model}: non-finite forces")
         t_f = mean_ms(lambda: term.evaluate(x, None, np.zeros((n, 3)), False), reps)
         t_h = mean_ms(lambda: term.evaluate(x, None, np.zeros((n, 3)), True), reps)
-        print(f"| {label} | {model} | {'yes' if project else 'no'} | {t_f:.1f} | {t_h:.1f} |")
+        x1 = x + 3e-5 * rng.normal(size=x.shape)
+        term.evaluate_between(x, x1, None, np.zeros((n, 3)), False)      # warm up
+        t_g = mean_ms(lambda: term.evaluate_between(x, x1, None, np.zeros((n, 3)), False), reps)
+        print(f"| {label} | {model} | {'yes' if project else 'no'} | {t_f:.1f} | {t_h:.1f} "
+              f"| {t_g:.1f} |")
     print()
 
 

@@ -156,7 +156,7 @@ def test_resolved_source_text_loads_back_to_an_equal_config(scene_dir):
 THE_EFFECTS = ("one of gravity | membrane | bending | damping | drag | collisions | self_collision | "
                "strain_limiting | loads")
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
-             "newmark_gamma, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
+             "newmark_gamma, energy_momentum, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
              "require_newton_convergence")
 
 # (key path set on base_scene(), value, the expected line after 'config error: ')

@@ -43,6 +43,9 @@ DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
 DRAPE_STOP_ON = ("potential", "kinetic", "both")
 DRAPE_CRITERIA = ("force", "motion")
 MAX_NEWTON_ITERATIONS = 100
+# the energy-momentum midpoint's default: measured 12 per step on average on a
+# swinging FE sheet at h = 10 ms, at most 30 (docs/integrators.md)
+ENERGY_MOMENTUM_NEWTON_ITERATIONS = 30
 
 # The prefix of distcloth's PETSc options (-distcloth_ksp_rtol), written once:
 # linalg/petsc.py and the command line take it from here.
@@ -544,15 +547,27 @@ class TimeSpec:
     integrator: str = choice("backward_euler", INTEGRATORS, doc="implicit: backward_euler, bdf2, "
                              "implicit_midpoint, newmark; explicit: symplectic_euler, "
                              "explicit_midpoint, rk4")
-    newton_iterations: int = setting(1, doc="Newton iterations per step; 1 is Baraff and "
-                                     "Witkin's single linearised step", at_least=1,
-                                     at_most=MAX_NEWTON_ITERATIONS)
+    newton_iterations: int | None = setting(None, doc="Newton iterations per step at most; 1 is "
+                                            "Baraff and Witkin's single linearised step; null: "
+                                            "1, but 30 for implicit_midpoint and newmark with "
+                                            "energy_momentum (their energy is conserved by the "
+                                            "converged step)", at_least=1,
+                                            at_most=MAX_NEWTON_ITERATIONS)
     newton_tolerance: float = setting(1.0e-8, doc="relative residual force norm that stops "
                                       "Newton early", above=0)
     newmark_beta: float = setting(0.25, doc="Newmark's beta (1/4: average acceleration)",
                                   at_least=0, at_most=0.5)
     newmark_gamma: float = setting(0.5, doc="Newmark's gamma (1/2: second order, no numerical "
                                    "damping)", above=0, at_most=1)
+    energy_momentum: bool = setting(True, doc="implicit_midpoint, and newmark with beta 1/4 and "
+                                    "gamma 1/2: the Newton residual takes the conservative forces "
+                                    "as discrete gradients between the step's end positions "
+                                    "(Simo and Tarnow 1992, Gonzalez 1996), so a converged step "
+                                    "keeps the energy of membrane, springs, gravity and isometric "
+                                    "bending; false: forces at the midpoint (Newmark: the "
+                                    "trapezoidal average), which gains energy on stiff nonlinear "
+                                    "membranes. Needs Newton iterated (newton_iterations null or "
+                                    ">= 2; docs/integrators.md)")
     adaptive: bool = setting(False, doc="retry a rejected step (failed solve, NaN, blow-up, "
                              "strain bound, energy gain) as two steps of h/2")
     max_halvings: int = setting(6, doc="how many times adaptive may halve a step", at_least=1,

@@ -15,7 +15,23 @@ Baraff and Witkin (1998) do for backward Euler:
     (M - s a_v D - s a_x K) dv = M d + s (f0 + K (x_pred - x0))
 
 so ``time.newton_iterations: 1`` is the classic one-linear-solve step for
-every scheme; more iterations continue Newton on g until |S g| <= tol |b0|.
+every scheme (the default, except for the energy-momentum midpoint below);
+more iterations continue Newton on g until |S g| <= tol |b0|.
+
+Energy-momentum midpoint (``time.energy_momentum``, Simo and Tarnow 1992;
+Gonzalez 1996).  The midpoint rule evaluates f at (x0 + x1)/2 and conserves
+energy only for energies quadratic in x; on a stiff nonlinear membrane its
+converged steps gain energy until the run blows up (docs/integrators.md), and
+so does the trapezoidal rule (Newmark 1/4, 1/2).  With energy_momentum the
+residual's conservative forces are discrete gradients between x0 and x1
+(``ForceTerm.evaluate_between``), f . (x1 - x0) = -(U(x1) - U(x0)), so with
+x1 - x0 = h (v0 + v1)/2 the kinetic energy changes by exactly the work
+h f . (v0 + v1)/2 = -(U1 - U0): a converged step conserves energy to the Newton
+tolerance, and the scheme stays second order (the discrete gradient differs
+from f at the midpoint by O(|x1 - x0|^2)).  Newton's matrix is the midpoint
+Hessian, which differs from the discrete gradient's own derivative by
+O(|x1 - x0|): Newton converges linearly, fast while the step moves the
+elements little against their size.
 """
 from __future__ import annotations
 
@@ -23,9 +39,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config.schema import ENERGY_MOMENTUM_NEWTON_ITERATIONS
 from ..linalg.constraints import Constraints
 from ..state import MultistepHistory
 from .base import Integrator, StepResult
+
+
+# an iteration that leaves more than this fraction of the residual triggers the
+# half-step test (measured on the stability suite's hanging sheet: a stalled
+# step oscillates with ratios 0.85-1.1, healthy steps contract by 0.5-0.7)
+DAMPING_TRIGGER = 0.8
 
 
 @dataclass
@@ -48,6 +71,26 @@ class ImplicitScheme(Integrator):
         n = ctx.n_owned
         return aff.x_pred[:n] + aff.a_x * dv[:n], state.v[:n] + dv[:n], aff.a_x
 
+    def newton_iterations(self) -> int:
+        """time.newton_iterations, or this scheme's default when it is null."""
+        n = self.cfg.time.newton_iterations
+        return n if n is not None else (ENERGY_MOMENTUM_NEWTON_ITERATIONS
+                                        if self.energy_momentum() else 1)
+
+    def energy_momentum(self) -> bool:
+        """True if the Newton residual takes discrete-gradient forces."""
+        return False
+
+    def damped_newton(self) -> bool:
+        """Halve a Newton update that reduced the residual by less than
+        DAMPING_TRIGGER (the energy-momentum schemes: their energy is only
+        as good as the converged residual)."""
+        return self.energy_momentum()
+
+    def residual_forces(self, ctx, state, h, aff: Affine, dv):
+        """The forces of the Newton residual at the velocity change dv (local rows)."""
+        return ctx.forces(aff.x_pred + aff.a_x * dv, state.v + aff.a_v * dv, want_jac=True)
+
     def history(self, state, h) -> MultistepHistory | None:
         """What the state keeps of this step if it is committed (multistep schemes)."""
         return None
@@ -68,15 +111,30 @@ class ImplicitScheme(Integrator):
         dv = ctx.local_array(dv_owned)
         reaction = info.reaction
         newton_its, rel, converged = 1, 0.0, True
-        max_its = self.cfg.time.newton_iterations
+        max_its = self.newton_iterations()
         if max_its > 1:
             converged = False
             b0 = max(ctx.global_norm(b), 1e-300)
             relaxed = Constraints(cons.index, cons.S, np.zeros_like(cons.z))
+            delta, last = None, np.inf
+
+            def residual(dv):
+                g = m * (dv[:n] - aff.d) - aff.s * self.residual_forces(ctx, state, h, aff, dv)[:n]
+                return g, ctx.global_norm(ctx.project(relaxed, -g)) / b0
+
             while newton_its < max_its:
-                f = ctx.forces(aff.x_pred + aff.a_x * dv, v0 + aff.a_v * dv, want_jac=True)
-                g = m * (dv[:n] - aff.d) - aff.s * f[:n]
-                rel = ctx.global_norm(ctx.project(relaxed, -g)) / b0
+                g, rel = residual(dv)
+                if delta is not None and rel > DAMPING_TRIGGER * last and self.damped_newton():
+                    # slow progress: Newton's matrix (projected Hessians at the
+                    # midpoint) is far from the residual's derivative and the
+                    # iteration overshoots; the half step is kept if it is better
+                    half = dv.copy()
+                    half[:n] -= 0.5 * delta
+                    ctx.update_ghosts(half)
+                    g_half, rel_half = residual(half)
+                    if rel_half < rel:
+                        dv, g, rel = half, g_half, rel_half
+                last = rel
                 if rel <= self.cfg.time.newton_tolerance:
                     converged = True
                     break
@@ -116,13 +174,44 @@ class ImplicitMidpoint(ImplicitScheme):
         v1 = state.v[:n] + dv[:n]
         return state.x[:n] + 0.5 * h * (state.v[:n] + v1), v1, 0.5 * h
 
+    def energy_momentum(self):
+        return self.cfg.time.energy_momentum
+
+    def residual_forces(self, ctx, state, h, aff, dv):
+        if not self.energy_momentum():
+            return super().residual_forces(ctx, state, h, aff, dv)
+        x1 = state.x + h * state.v + 0.5 * h * dv
+        return ctx.forces(x1, state.v + 0.5 * dv, want_jac=True, start=state.x)
+
 
 class Newmark(ImplicitScheme):
     """x1 = x0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1), v1 = v0 + h ((1 - gamma) a0 + gamma a1),
     M a1 = f(x1, v1); a0 = M^-1 f(x0, v0) with constrained directions at rest.
-    Second order for gamma = 1/2; beta = 1/4 is the average-acceleration rule."""
+    Second order for gamma = 1/2; beta = 1/4 is the average-acceleration rule.
+
+    With beta = 1/4, gamma = 1/2 the positions follow x1 - x0 = h (v0 + v1)/2 and
+    M (v1 - v0) = h (f0 + f1)/2: the midpoint rule's kinematics with the
+    trapezoidal force average.  With ``time.energy_momentum`` that average is
+    replaced by the discrete gradient, which makes the step the energy-momentum
+    midpoint (ImplicitMidpoint's); other beta, gamma are not conserving."""
+
+    def energy_momentum(self):
+        t = self.cfg.time
+        return t.energy_momentum and t.newmark_beta == 0.25 and t.newmark_gamma == 0.5
+
+    def final(self, ctx, state, h, aff, dv):
+        if self.energy_momentum():
+            return ImplicitMidpoint.final(self, ctx, state, h, aff, dv)
+        return super().final(ctx, state, h, aff, dv)
+
+    def residual_forces(self, ctx, state, h, aff, dv):
+        if self.energy_momentum():
+            return ImplicitMidpoint.residual_forces(self, ctx, state, h, aff, dv)
+        return super().residual_forces(ctx, state, h, aff, dv)
 
     def affine(self, ctx, state, h, f0, cons):
+        if self.energy_momentum():
+            return ImplicitMidpoint.affine(self, ctx, state, h, f0, cons)
         beta, gamma = self.cfg.time.newmark_beta, self.cfg.time.newmark_gamma
         n = ctx.n_owned
         a0 = ctx.local_array(ctx.project(cons, f0[:n] / ctx.mass[:n, None]))

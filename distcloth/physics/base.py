@@ -8,6 +8,13 @@ communicator:
 * ``bind(pattern)``: remember where its blocks go in the value array;
 * ``evaluate(x, v, force, want_jac)``: add its forces to ``force`` and keep
   what the Jacobian needs;
+* ``evaluate_between(x0, x1, v, force, want_jac)``: the force of a step from
+  x0 to x1 for the energy-momentum midpoint (integrate/implicit.py): a
+  discrete gradient, force . (x1 - x0) = -(U(x1) - U(x0)) exactly (Gonzalez
+  1996), with the Jacobian kept at the midpoint.  The default evaluates at
+  the midpoint, which is exact for energies quadratic in x (gravity,
+  isometric bending) and second order for the rest (dihedral bending);
+  dissipative terms get the midpoint velocity;
 * ``stiffness_product(w, out)``: out += (df/dx) w at the last evaluation;
 * ``add_to_system(data, alpha, beta)``: add its part of
   A = M - beta df/dv - alpha df/dx to the block values;
@@ -33,6 +40,16 @@ class ForceTerm:
 
     def evaluate(self, x, v, force, want_jac):
         pass
+
+    def evaluate_between(self, x0, x1, v, force, want_jac):
+        return self.evaluate(0.5 * (x0 + x1), v, force, want_jac)
+
+    def stage(self, x, v, force, want_jac, start=None):
+        """The force stage's call: ``evaluate`` at x, or with ``start`` the
+        step's force from start to x (``evaluate_between``)."""
+        if start is None:
+            return self.evaluate(x, v, force, want_jac)
+        return self.evaluate_between(start, x, v, force, want_jac)
 
     def stiffness_product(self, w, out):
         pass

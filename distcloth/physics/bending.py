@@ -333,6 +333,48 @@ def dihedral_forces(x, hinge, theta0, kb, weight, force, grad, coef):
 
 
 @njit(cache=True)
+def dihedral_discrete_gradient(x0, x1, xm, hinge, theta0, kb, force):
+    """force += the dihedral bending force of a step from x0 to x1 (xm their
+    midpoint): -kb (d0 + d1) gbar per hinge, d = theta - theta0, with gbar a
+    discrete gradient of theta (Gonzalez 1996): gbar = g_m + (theta1 - theta0
+    - g_m . r) r / |r|^2, g_m = grad theta at xm, r = x1 - x0 on the hinge's
+    four vertices less its mean (a translation: g_m . r = g_m . (x1 - x0) and
+    gbar keeps summing to zero).  gbar . (x1 - x0) = theta1 - theta0, so the
+    force's work is -(U1 - U0) exactly; gbar - g_m = O(|r|^2)."""
+    g = np.empty((4, 3))
+    r = np.empty((4, 3))
+    for h in range(hinge.shape[0]):
+        i0 = hinge[h, 0]
+        i1 = hinge[h, 1]
+        i2 = hinge[h, 2]
+        i3 = hinge[h, 3]
+        t0 = hinge_angle_gradient(x0, i0, i1, i2, i3, g)
+        t1 = hinge_angle_gradient(x1, i0, i1, i2, i3, g)
+        hinge_angle_gradient(xm, i0, i1, i2, i3, g)
+        rr = 0.0
+        gr = 0.0
+        le2 = 0.0
+        for c in range(3):
+            mean = 0.0
+            for a in range(4):
+                mean += x1[hinge[h, a], c] - x0[hinge[h, a], c]
+            mean *= 0.25
+            for a in range(4):
+                r[a, c] = x1[hinge[h, a], c] - x0[hinge[h, a], c] - mean
+                rr += r[a, c] * r[a, c]
+                gr += g[a, c] * r[a, c]
+            de = xm[i1, c] - xm[i0, c]
+            le2 += de * de
+        # below a move of 1e-10 of the hinge's edge the correction is round-off
+        corr = (t1 - t0 - gr) / rr if rr > 1e-20 * le2 else 0.0
+        m = kb[h] * (t0 + t1 - 2.0 * theta0[h])
+        for a in range(4):
+            i = hinge[h, a]
+            for c in range(3):
+                force[i, c] -= m * (g[a, c] + corr * r[a, c])
+
+
+@njit(cache=True)
 def gauss_newton_stiffness_product(hinge, grad, coef, w, out):
     """out -= coef (grad . w) grad per hinge (out += df/dx w, Gauss-Newton)."""
     for h in range(hinge.shape[0]):
@@ -663,6 +705,15 @@ class DihedralBendingTerm(_HingeTerm):
         if want_jac and self.hessian == "exact":
             self._x = np.array(x, dtype=np.float64, order="C")
         return {"elastic_energy": energy}
+
+    def evaluate_between(self, x0, x1, v, force, want_jac):
+        x0 = np.ascontiguousarray(x0, dtype=np.float64)
+        x1 = np.ascontiguousarray(x1, dtype=np.float64)
+        xm = 0.5 * (x0 + x1)
+        if want_jac:     # the Newton matrix: the Hessian at the midpoint
+            self.evaluate(xm, v, np.zeros_like(force), True)
+        dihedral_discrete_gradient(x0, x1, xm, self.hinges, self.theta0, self.kb, force)
+        return {}
 
     def stiffness_product(self, w, out):
         if self.hessian == "exact":

@@ -384,6 +384,34 @@ def _project_psd6(A):
 
 
 @njit(cache=True)
+def _green_strain(x, G, el, i0, i1, i2, F, e):
+    """F = sum_i x_i g_i^T (3x2) and its Green strain e (Voigt, engineering shear)."""
+    for k in range(3):
+        for al in range(2):
+            F[k, al] = x[i0, k] * G[el, 0, al] + x[i1, k] * G[el, 1, al] + x[i2, k] * G[el, 2, al]
+    e[0] = 0.5 * (F[0, 0] * F[0, 0] + F[1, 0] * F[1, 0] + F[2, 0] * F[2, 0] - 1.0)
+    e[1] = 0.5 * (F[0, 1] * F[0, 1] + F[1, 1] * F[1, 1] + F[2, 1] * F[2, 1] - 1.0)
+    e[2] = F[0, 0] * F[0, 1] + F[1, 0] * F[1, 1] + F[2, 0] * F[2, 1]
+
+
+@njit(cache=True)
+def _add_element_force(F, sig, A, G, tris, el, B, gF, force):
+    """force -= A sig . de/dx for element el: B = de/dF at F (3x6, column
+    alpha*3 + l; B[1, :3] and B[0, 3:] stay zero), the vertices through G."""
+    for l in range(3):
+        B[0, l] = F[l, 0]
+        B[1, 3 + l] = F[l, 1]
+        B[2, l] = F[l, 1]
+        B[2, 3 + l] = F[l, 0]
+    for col in range(6):
+        gF[col] = A * (sig[0] * B[0, col] + sig[1] * B[1, col] + sig[2] * B[2, col])
+    for vi in range(3):
+        node = tris[el, vi]
+        for k in range(3):
+            force[node, k] -= G[el, vi, 0] * gF[k] + G[el, vi, 1] * gF[3 + k]
+
+
+@njit(cache=True)
 def membrane_forces(x, tris, G, Rg, area, C, model, weight, want_jac, project,
                     force, hr, tables=NO_TABLE):
     """Accumulate membrane forces into ``force`` (n_local, 3).
@@ -409,33 +437,13 @@ def membrane_forces(x, tris, G, Rg, area, C, model, weight, want_jac, project,
         i0 = tris[el, 0]
         i1 = tris[el, 1]
         i2 = tris[el, 2]
-        for k in range(3):
-            for al in range(2):
-                F[k, al] = (x[i0, k] * G[el, 0, al] + x[i1, k] * G[el, 1, al]
-                            + x[i2, k] * G[el, 2, al])
-        c00 = F[0, 0] * F[0, 0] + F[1, 0] * F[1, 0] + F[2, 0] * F[2, 0]
-        c11 = F[0, 1] * F[0, 1] + F[1, 1] * F[1, 1] + F[2, 1] * F[2, 1]
-        c01 = F[0, 0] * F[0, 1] + F[1, 0] * F[1, 1] + F[2, 0] * F[2, 1]
-        e[0] = 0.5 * (c00 - 1.0)
-        e[1] = 0.5 * (c11 - 1.0)
-        e[2] = c01
+        _green_strain(x, G, el, i0, i1, i2, F, e)
         W, pm = _energy_density(e, C, model, want_jac, sig, D, wk, tables)
         A = area[el]
         energy += W * A * weight[el]
         if pm > max_strain:
             max_strain = pm
-        # B = de/dF, column index alpha*3 + l
-        for l in range(3):
-            B[0, l] = F[l, 0]
-            B[1, 3 + l] = F[l, 1]
-            B[2, l] = F[l, 1]
-            B[2, 3 + l] = F[l, 0]
-        for col in range(6):
-            gF[col] = A * (sig[0] * B[0, col] + sig[1] * B[1, col] + sig[2] * B[2, col])
-        for vi in range(3):
-            node = tris[el, vi]
-            for k in range(3):
-                force[node, k] -= G[el, vi, 0] * gF[k] + G[el, vi, 1] * gF[3 + k]
+        _add_element_force(F, sig, A, G, tris, el, B, gF, force)
         if want_jac:
             # HF = A (B^T D B + Sigma_mat (x) I3)
             for p in range(6):
@@ -480,6 +488,58 @@ def membrane_forces(x, tris, G, Rg, area, C, model, weight, want_jac, project,
     if ne == 0:
         max_strain = 0.0
     return energy, max_strain
+
+
+@njit(cache=True)
+def membrane_discrete_gradient(x0, x1, tris, G, area, C, model, force, tables=NO_TABLE):
+    """Accumulate the membrane force of a step from x0 to x1 into ``force``: a
+    discrete gradient, force . (x1 - x0) = -(U(x1) - U(x0)) to round-off.
+
+    The Green strain is quadratic in x, so e1 - e0 = B(F_m) : (F1 - F0) exactly
+    with F_m = (F0 + F1)/2; the stress is Gonzalez's discrete gradient of W in
+    strain space (Gonzalez 1996), sig = dW/de(e_m) + (W1 - W0 - dW/de(e_m) . de)
+    de / |de|^2 with e_m = (e0 + e1)/2.  For stvk W is quadratic in e, the
+    correction vanishes and sig = C (e0 + e1)/2: Simo and Tarnow's (1992)
+    average of the end-point stresses with F at the midpoint."""
+    ne = tris.shape[0]
+    F0 = np.empty((3, 2))
+    F1 = np.empty((3, 2))
+    e0 = np.empty(3)
+    e1 = np.empty(3)
+    em = np.empty(3)
+    sig = np.empty(3)
+    sc = np.empty(3)
+    D = np.empty((3, 3))
+    B = np.zeros((3, 6))
+    gF = np.empty(6)
+    wk = np.empty((8, 3, 3))
+    for el in range(ne):
+        i0 = tris[el, 0]
+        i1 = tris[el, 1]
+        i2 = tris[el, 2]
+        _green_strain(x0, G, el, i0, i1, i2, F0, e0)
+        _green_strain(x1, G, el, i0, i1, i2, F1, e1)
+        for m in range(3):
+            em[m] = 0.5 * (e0[m] + e1[m])
+        _energy_density(em, C, model, False, sig, D, wk, tables)
+        if model != STVK:
+            W0 = _energy_density(e0, C, model, False, sc, D, wk, tables)[0]
+            W1 = _energy_density(e1, C, model, False, sc, D, wk, tables)[0]
+            dd = 0.0
+            lin = 0.0
+            for m in range(3):
+                de = e1[m] - e0[m]
+                dd += de * de
+                lin += sig[m] * de
+            # below a strain change of 1e-12 the correction is round-off of W1 - W0
+            if dd > 1e-24:
+                c = (W1 - W0 - lin) / dd
+                for m in range(3):
+                    sig[m] += c * (e1[m] - e0[m])
+        for k in range(3):
+            for al in range(2):
+                F0[k, al] = 0.5 * (F0[k, al] + F1[k, al])
+        _add_element_force(F0, sig, area[el], G, tris, el, B, gF, force)
 
 
 @njit(cache=True)
@@ -599,6 +659,15 @@ class MembraneFEMTerm(ForceTerm):
     def evaluate(self, x, v, force, want_jac):
         energy, strain = self._run(x, force, want_jac)
         return {"elastic_energy": energy, "max_strain": strain}
+
+    def evaluate_between(self, x0, x1, v, force, want_jac):
+        x0 = np.ascontiguousarray(x0, dtype=np.float64)
+        x1 = np.ascontiguousarray(x1, dtype=np.float64)
+        if want_jac:     # the Newton matrix: the Hessian at the midpoint
+            self._run(0.5 * (x0 + x1), np.zeros_like(x1), True)
+        membrane_discrete_gradient(x0, x1, self.tris, self.G, self.area, self.C, self.model,
+                                   force, self.tables)
+        return {}
 
     def stiffness_product(self, w, out):
         membrane_stiffness_product(self.tris, self.hr, np.ascontiguousarray(w), out)

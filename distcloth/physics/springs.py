@@ -79,6 +79,35 @@ def spring_forces(x, v, springs, rest, k, c, weight, clamp, want_jac,
 
 
 @njit(cache=True)
+def spring_discrete_gradient(x0, x1, springs, rest, k, force):
+    """Accumulate the elastic spring force of a step from x0 to x1 into ``force``:
+    f_i = -k (lbar - l0) / lbar * (d0 + d1)/2, lbar = (|d0| + |d1|)/2, the
+    discrete gradient of 1/2 k (l - l0)^2 (Gonzalez 1996; Simo and Tarnow 1992):
+    since |d1| - |d0| = (d0 + d1) . (d1 - d0) / (|d0| + |d1|), f_i . (d1 - d0)
+    = -(U1 - U0) exactly."""
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        a0 = x0[i, 0] - x0[j, 0]
+        a1 = x0[i, 1] - x0[j, 1]
+        a2 = x0[i, 2] - x0[j, 2]
+        b0 = x1[i, 0] - x1[j, 0]
+        b1 = x1[i, 1] - x1[j, 1]
+        b2 = x1[i, 2] - x1[j, 2]
+        lbar = 0.5 * (np.sqrt(a0 * a0 + a1 * a1 + a2 * a2) + np.sqrt(b0 * b0 + b1 * b1 + b2 * b2))
+        mag = -0.5 * k[s] * (lbar - rest[s]) / lbar
+        f0 = mag * (a0 + b0)
+        f1 = mag * (a1 + b1)
+        f2 = mag * (a2 + b2)
+        force[i, 0] += f0
+        force[i, 1] += f1
+        force[i, 2] += f2
+        force[j, 0] -= f0
+        force[j, 1] -= f1
+        force[j, 2] -= f2
+
+
+@njit(cache=True)
 def spring_stiffness_product(springs, hess, w, out):
     """out += (df/dx) w for the springs' Hessian blocks: (df/dx w)_i = -H (w_i - w_j)."""
     for s in range(springs.shape[0]):

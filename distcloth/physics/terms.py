@@ -49,6 +49,12 @@ class SpringTerm(_SpringSet):
         sk.spring_forces(x, v, self.springs, self.rest, self.k, self._zero, self.weight,
                          self.clamp, want_jac, force, self.hess, self.unit, self.strain_mask)
 
+    def evaluate_between(self, x0, x1, v, force, want_jac):
+        if want_jac:     # the Newton matrix: the Hessian at the midpoint
+            self.evaluate(0.5 * (x0 + x1), v, np.zeros_like(force), True)
+        sk.spring_discrete_gradient(np.ascontiguousarray(x0), np.ascontiguousarray(x1),
+                                    self.springs, self.rest, self.k, force)
+
     def stiffness_product(self, w, out):
         sk.spring_stiffness_product(self.springs, self.hess, w, out)
 
