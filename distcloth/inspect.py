@@ -53,6 +53,8 @@ def describe(path: str) -> list[str]:
 
 def _status(a) -> str:
     status = a.get("status", "?")
+    if status == "no_rest_state":
+        return f"no rest state at iteration {a.get('error_step')}: {a.get('error', '')}"
     if status == "failed":
         return f"failed at step {a.get('error_step')}: {a.get('error', '')}"
     if status == "interrupted":

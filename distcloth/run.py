@@ -28,7 +28,7 @@ from .collision.surfaces import collider_surfaces
 from .config import format_config_error
 from .config.schema import ConfigError
 from .frame_fields import FRAME_FIELDS
-from .integrate.drape import DRAPE_DIAGNOSTICS, Relaxation, drape_converged
+from .integrate.drape import DRAPE_DIAGNOSTICS, NoRestState, Relaxation, drape_converged
 from .interrupt import Interrupts, signal_name
 from .checkpointing import Checkpoints, open_resume
 from .io.checkpoint import checkpoint_path
@@ -298,7 +298,9 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
     """``distcloth drape``: relax to the rest state (Volino and Magnenat-Thalmann
     2007); a frame every ``drape.frame_every`` iterations and the last; frame
     'time' is the iteration.  SIGTERM or SIGINT ends it after the iteration
-    (status 'interrupted'); a relaxation has no checkpoint: it starts again."""
+    (status 'interrupted'); a relaxation has no checkpoint: it starts again.
+    A cloth that can come to no rest (Relaxation.no_rest_state) stops with
+    status 'no_rest_state', the cause, and exit status 3."""
     t_start = time.perf_counter()
     code = _agree_config(comm, refuse_moving_grips(cfg))
     if code:
@@ -333,11 +335,15 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
                 times, calls = sim.pipeline.take_step_counters()
                 writer.write_step(k, float(k), diag, times, calls)
                 done = drape_converged(diag, spec)
+                stuck = None if done else relax.no_rest_state()
                 signum = int(comm.max(np.array([float(interrupts.pending(k))]))[0])
-                if done or signum or k % spec.frame_every == 0 or k == spec.max_iterations:
+                if done or stuck or signum or k % spec.frame_every == 0 \
+                        or k == spec.max_iterations:
                     writer.write_frame(k, float(k), sim.owned_positions(), body_time=sim.state.t,
                                        fields=sim.frame_fields())
                 bar.update(k, float(k))
+                if stuck:
+                    raise NoRestState(k, stuck)
                 if done or signum:
                     break
             else:
@@ -346,8 +352,8 @@ def drape(cfg, comm, *, output=None, cmdline_options=None, quiet=False) -> int:
                                          f"{spec.tolerance:g})")
         except SimulationError as exc:
             log(comm, f"stopped: {exc}")
-            writer.record_error(exc.step, str(exc))
-            status, code = "failed", 1
+            status, code = ("no_rest_state", 3) if isinstance(exc, NoRestState) else ("failed", 1)
+            writer.record_error(exc.step, str(exc), status)
     if signum:
         writer.record_interrupt(k, signal_name(signum))
         status, code = "interrupted", 128 + signum

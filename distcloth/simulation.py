@@ -284,10 +284,11 @@ class Simulation:
                 term.at_time(t_end)
         return self.held.targets(self.state, h, t_end, self.integrator)
 
-    def constraints(self, target_velocity=None, contacts=None) -> Constraints:
+    def constraints(self, target_velocity=None, contacts=None, static=None) -> Constraints:
         """Pins (S = 0), sliding pins (S = I - a a^T) and contacts (S = I - n n^T,
         never on held vertices): z takes the constrained directions of the
-        velocity change to the target."""
+        velocity change to the target.  ``static``: (index, S, z) of a static
+        relaxation's contacts (the drape's Newton step, z: their displacement)."""
         v = self.state.v
         idx = np.concatenate([self.pinned_local, self.slide_local])
         S = np.concatenate([np.zeros((self.pinned_local.size, 3, 3)), self.slide_S])
@@ -299,6 +300,10 @@ class Simulation:
             idx = np.concatenate([idx, cidx])
             S = np.concatenate([S, cS])
             z = np.concatenate([z, cz])
+        if static is not None and static[0].size:
+            idx = np.concatenate([idx, static[0]])
+            S = np.concatenate([S, static[1]])
+            z = np.concatenate([z, static[2]])
         order = np.argsort(idx, kind="stable")
         return Constraints(idx[order], S[order], z[order])
 

@@ -58,8 +58,7 @@ from .impulses import ReusedCandidates, resolve
 from .mesh_query import MeshProximity
 from .proximity import mesh_edges
 from .sagitta import body_clearance
-from .response import (Contacts, contact_constraint, detect, friction, normal_impulse, project,
-                       unbalanced_force)
+from .response import Contacts, contact_constraint, detect, friction, normal_impulse, project
 
 MAX_CONTACT_PASSES = 4   # solves per attempt at most while the contact set changes
 MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
@@ -219,6 +218,9 @@ class ContactModel:
         self.thickness = float(thick.max(initial=0.0))     # the triangle pipeline's contact distance
         self.never_contact = np.zeros(self.n_local, dtype=bool)   # pins keep their constraint
         self.never_contact[held] = True
+        self.sticking = None     # a static relaxation's sticking contacts (stick)
+        # a drape lowers it below its residual tolerance: a contact's pull is unbalanced force
+        self.adhesion_tolerance = ADHESION_TOLERANCE
         self.gravity = np.asarray(cfg.gravity if cfg.has("gravity") else (0.0, 0.0, 0.0), float)
         self.gravity_norm = float(np.linalg.norm(self.gravity))
         # friction as a force of the solve: the colliders whose law says so
@@ -297,23 +299,48 @@ class ContactModel:
             phis[j], normals[j], vels[j] = c.query(x, t, maxd)
         return phis, normals, vels, offsets
 
-    def unbalanced(self, x, t, f):
-        """(n,) the part of the forces ``f`` on the first n = len(f) local
-        vertices at positions x that no body supports: a vertex within the
-        contact band of its deepest body (phi <= (1 + BAND_FRACTION) d) is
-        held against pushes into it and, by static friction, against
-        tangential forces inside its friction cone (response.unbalanced_force).
-        Local: no exchange."""
-        n = f.shape[0]
+    def support(self, x, t, n):
+        """(touching, normal, mu, gap) of the first n local vertices at
+        positions x: a vertex within the contact band of its deepest body
+        (gap = phi - d <= BAND_FRACTION d) touches it, with that body's
+        outward normal and Coulomb mu.  Local: no exchange."""
         if not self.colliders:
-            return np.sqrt(np.einsum("ij,ij->i", f, f))
+            return np.zeros(n, dtype=bool), np.zeros((n, 3)), np.zeros(n), np.full(n, np.inf)
         phis, normals, _, offsets = self.query(x[:n], t, (1.0 + BAND_FRACTION) * self.d_max)
         gap = phis - offsets
         deepest = np.argmin(gap, axis=0)
         rows = np.arange(n)
         touching = gap[deepest, rows] <= BAND_FRACTION * offsets[deepest, rows]
+        touching &= ~self.never_contact[:n]
         mu = np.array([c.friction for c in self.colliders])[deepest]
-        return unbalanced_force(f, touching, normals[deepest, rows], mu)
+        return touching, normals[deepest, rows], mu, gap[deepest, rows]
+
+    def push_out(self, x, t):
+        """The positions x (every local row) with each vertex inside a closed
+        body moved along its normal to phi = d (a static relaxation's
+        fail-safe; the same answer for a vertex on every rank that holds it)."""
+        free = ~self.never_contact[: x.shape[0]]
+        x, _, _ = self._project_out(x.copy(), np.zeros_like(x), t, free)
+        return x
+
+    def _project_out(self, x, v, t, free, queried=None):
+        """Distance-field colliders in turn: the ``free`` vertices inside
+        moved out along n (inward relative normal velocity removed); x, v
+        updated in place.  Returns (x, v, moved mask)."""
+        reach = (1.0 + BAND_FRACTION) * self.d_max
+        phis, normals, vels, offsets = queried if queried is not None else \
+            self.query(x, t, reach)
+        moved = np.zeros(x.shape[0], dtype=bool)
+        for j, c in enumerate(self.colliders):
+            if not c.closed:
+                continue
+            if moved.any():     # an earlier collider's projection moved vertices: query again
+                phis[j], normals[j], vels[j] = c.query(x, t, reach)
+            xs, vs, inside = project(x[free], v[free], phis[j][free], normals[j][free],
+                                     vels[j][free], offsets[j][free])
+            x[free], v[free] = xs, vs
+            moved[np.nonzero(free)[0][inside]] = True
+        return x, v, moved
 
     # --------------------------------------------------- 2. detection
     def detect(self, state, h: float, revision: ContactRevision | None = None) -> Contacts:
@@ -341,24 +368,46 @@ class ContactModel:
                       BAND_FRACTION * offsets, exclude, persistent, forced)
 
     # ------------------------------------------------- 3. constraints
-    @staticmethod
-    def constraints(contacts: Contacts, v):
-        """(index, S, z) of the contacts (never on held vertices)."""
+    def constraints(self, contacts: Contacts, v):
+        """(index, S, z) of the contacts (never on held vertices); a contact
+        the drape marked as sticking (``stick``) is held whole: S = 0, its
+        velocity brought to the body's (tangentially) and its target
+        (normally)."""
         S, z = contact_constraint(contacts, v)
+        if self.sticking is not None and contacts.index.size:
+            held = self.sticking[contacts.index]
+            n, u = contacts.normal[held], contacts.velocity[held]
+            S[held] = 0.0
+            z[held] = (u - np.einsum("ni,ni->n", u, n)[:, None] * n
+                       + contacts.target[held, None] * n - v[contacts.index[held]])
         return contacts.index, S, z
+
+    def stick(self, owned_mask) -> None:
+        """A static relaxation's sticking contacts (Baraff and Witkin 1998 §5:
+        a stuck contact is a constraint): the owned vertices of ``owned_mask``
+        that become contacts are held still on the body instead of creeping
+        under the regularised friction force (physics/contact_friction.py);
+        None: none (a simulation's rule)."""
+        if owned_mask is None:
+            self.sticking = None
+            return
+        self.sticking = np.zeros(self.n_local, dtype=bool)
+        self.sticking[: owned_mask.size] = owned_mask
 
     # ---------------------------------------------- 4. friction in the solve
     def begin_attempt(self, contacts: Contacts, h: float) -> None:
         if self.friction_term is not None:
             use = self.in_solve[contacts.collider] if contacts.collider.size \
                 else np.zeros(0, dtype=bool)
+            if self.sticking is not None and contacts.index.size:
+                use = use & ~self.sticking[contacts.index]    # held whole: no friction force
             self.friction_term.begin_step(contacts, h, use)
 
     # ----------------------------------- 5. adhesive and missed contacts
     def revise(self, contacts: Contacts, result, t_end: float, h: float,
                revision: ContactRevision | None):
         """After a solve: contacts whose constraint pulled the vertex toward the
-        body (a negative normal impulse beyond ADHESION_TOLERANCE of its weight
+        body (a negative normal impulse beyond ``adhesion_tolerance`` of its weight
         impulse) are released, and free vertices that end deeper than
         MISSED_FRACTION d inside a body become contacts that land at d.
         Returns the revision (accumulated over the attempt's solves) if the
@@ -370,7 +419,7 @@ class ContactModel:
         if result.reaction is not None and idx.size:
             impulse = np.einsum("ni,ni->n", result.reaction[idx], contacts.normal[mine])
             scale = self.mass[idx] * h * max(self.gravity_norm, 1.0)
-            flags[idx[impulse < -ADHESION_TOLERANCE * scale], 0] = 1.0
+            flags[idx[impulse < -self.adhesion_tolerance * scale], 0] = 1.0
         phis, _, _, offsets = self.query(result.x, t_end, self.d_max)
         free = ~self.never_contact[:n]
         free[idx] = False
@@ -491,16 +540,8 @@ class ContactModel:
         phis, normals, vels, offsets = self.query(x_new, t_end, reach)
         pen = float(np.max((offsets - phis)[:, free], initial=-np.inf))
         touching = (phis < (1.0 + BAND_FRACTION) * offsets) & free[None]
-        moved = np.zeros(n, dtype=bool)
-        for j, c in enumerate(self.colliders):
-            if not c.closed:
-                continue
-            if moved.any():     # an earlier collider's projection moved vertices: query again
-                phis[j], normals[j], vels[j] = c.query(x_new, t_end, reach)
-            xs, vs, inside = project(x_new[free], v_new[free], phis[j][free], normals[j][free],
-                                     vels[j][free], offsets[j][free])
-            x_new[free], v_new[free] = xs, vs
-            moved[np.nonzero(free)[0][inside]] = True
+        x_new, v_new, moved = self._project_out(x_new, v_new, t_end, free,
+                                                (phis, normals, vels, offsets))
         return x_new, v_new, pen, int(moved.sum()), touching
 
     def _triangle_contact(self, state, x_new, v_new, h, gain, report):

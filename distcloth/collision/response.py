@@ -173,14 +173,42 @@ def project(x, v, phi, normal, vb, d) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return x, v, inside
 
 
+def coulomb_split(f, normal):
+    """(f.n, the tangential part of f, its length) per row: the normal and
+    tangential parts of forces ``f`` (n, 3) at a body with outward ``normal``."""
+    fn = np.einsum("ij,ij->i", f, normal)
+    ft = f - fn[:, None] * normal
+    return fn, ft, np.sqrt(np.einsum("ij,ij->i", ft, ft))
+
+
 def unbalanced_force(f, touching, normal, mu):
     """(n,) the part of the forces ``f`` (n, 3) that contacts cannot balance:
-    on a ``touching`` vertex with outward body ``normal`` and Coulomb ``mu``
-    the body supports any push into it (f.n <= 0) and static friction any
+    the residual of the Coulomb contact conditions (Wriggers 2006 ch. 5, the
+    friction cone |f_t| <= mu f_N with f_N >= 0 the body's reaction).  On a
+    ``touching`` vertex with outward body ``normal`` and Coulomb ``mu`` the
+    body supports any push into it (f.n <= 0) and static friction any
     tangential force up to mu |f.n|, so what is left is the excess over the
     friction cone; a pull away from the body and a free vertex keep |f|."""
+    fn, _, ft = coulomb_split(f, normal)
     mag = np.sqrt(np.einsum("ij,ij->i", f, f))
-    fn = np.einsum("ij,ij->i", f, normal)
-    ft = np.sqrt(np.maximum(mag * mag - fn * fn, 0.0))
     pressed = touching & (fn <= 0.0)
     return np.where(pressed, np.maximum(ft - mu * np.abs(fn), 0.0), mag)
+
+
+def coulomb_active_set(f, touching, normal, mu, slack=0.0):
+    """The contacts of a static (Newton) step under the forces ``f`` (n, 3):
+    (stick, slide, friction).  A touching vertex pressed into the body sticks
+    when its tangential force is inside the friction cone (widened by
+    ``slack``, a force per vertex: at impending slip within a tolerance is at
+    rest); outside it slides
+    against the cone's limit force ``friction`` = -mu |f.n| t (t the unit
+    tangential force; zero elsewhere), so what moves it is the excess over
+    the cone that ``unbalanced_force`` counts (Wriggers 2006 ch. 5: the
+    return mapping onto the Coulomb cone).  A pull away from the body frees it."""
+    fn, ft_vec, ft = coulomb_split(f, normal)
+    pressed = touching & (fn <= 0.0)
+    limit = mu * np.abs(fn)
+    stick = pressed & (ft <= limit + slack)
+    slide = pressed & ~stick
+    scale = np.where(slide, limit / np.maximum(ft, 1e-300), 0.0)
+    return stick, slide, -scale[:, None] * ft_vec

@@ -621,7 +621,9 @@ class DrapeSpec:
     motion_tolerance: float = setting(5.0e-4, doc="criterion motion: the largest displacement "
                                       "of any vertex over a window", unit="m", above=0)
     window: int = setting(20, doc="criterion motion: iterations over which the displacement is "
-                          "measured", at_least=1)
+                          "measured; any criterion: iterations an unpinned cloth that has "
+                          "touched a collider may touch none before the drape stops with no "
+                          "rest state (docs/drape.md)", at_least=1)
     max_iterations: int = setting(2000, doc="iterations before giving up", at_least=1)
     frame_every: int = setting(10, doc="iterations between frames", at_least=1)
 

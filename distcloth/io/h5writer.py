@@ -381,6 +381,7 @@ class ResultWriter:
         self.steps_written = 0
         self._closed = False
         self._error_recorded = False
+        self._error_status = "failed"
         stem = os.path.splitext(self.path)[0]
         self.xdmf_path = stem + ".xdmf"
 
@@ -773,13 +774,15 @@ class ResultWriter:
         if self._n_buffered == self._buf_len:
             self._flush_steps()
 
-    def record_error(self, step: int, message: str) -> None:
-        """Collective: mark the run failed at ``step`` (rank 0's arguments are used)."""
+    def record_error(self, step: int, message: str, status: str = "failed") -> None:
+        """Collective: mark the run ended by an error at ``step`` with ``status``
+        ('failed', or a drape's 'no_rest_state'; rank 0's arguments are used)."""
         self._require_open()
         step, message = self._comm.broadcast((int(step), str(message)), root=0)
         self._flush_steps()
         f = self._file
-        f.attrs["status"] = "failed"
+        f.attrs["status"] = str(status)
+        self._error_status = str(status)
         f.attrs["error"] = message
         f.attrs["error_step"] = np.int64(step)
         self._error_recorded = True
@@ -831,9 +834,9 @@ class ResultWriter:
         """Collective: write the remaining steps, set the final status, close;
         returns the status written.
 
-        A recorded error keeps status 'failed' whatever ``status`` says; a
-        completed run with warnings is 'completed_with_warnings'.  Calling
-        close twice is harmless.
+        A recorded error keeps its status ('failed', or the one it was
+        recorded with) whatever ``status`` says; a completed run with warnings
+        is 'completed_with_warnings'.  Calling close twice is harmless.
         """
         if self._closed:
             return self._final_status
@@ -841,7 +844,7 @@ class ResultWriter:
         self._beat()
         if status == "completed" and self.warnings():
             status = "completed_with_warnings"
-        self._final_status = "failed" if self._error_recorded else str(status)
+        self._final_status = self._error_status if self._error_recorded else str(status)
         self._file.attrs["status"] = self._final_status
         self._file.attrs["frames_written"] = np.int64(self.frames_written)
         self._file.attrs["steps_written"] = np.int64(self.steps_written)
