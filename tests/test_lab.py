@@ -173,11 +173,12 @@ def test_kes_shear_follows_simple_shear(comm):
 
 def test_kes_pure_bending_gives_the_bending_stiffness(comm):
     # between jaws on a circular arc the strip is that arc, M = B K exactly;
-    # the shell model's discretisation error at 8 cells over the 1 cm gap is
-    # -4 % (docs/lab.md has the refinement); 6 % bounds it
+    # the shell model's error over the 1 cm gap is -1.4 % at 8 cells and -1.8 %
+    # at 16 (cotton, docs/lab.md); 3 % bounds it.  Held on and behind the jaw
+    # lines the strip would bend over l + h: -11 % at 8 cells, which this catches
     r = kes_bending.run(_linear(0.3), ".", _comm(comm), resolution="coarse")
     assert not r.reason, r.reason
-    assert abs(r.b / r.b_law - 1.0) < 0.06, (r.b, r.b_law)
+    assert abs(r.b / r.b_law - 1.0) < 0.03, (r.b, r.b_law)
     # the moment grows linearly with the curvature: M / K is the same at both ends of the fit
     K, M = np.array(r.curvature), np.array(r.moment)
     mid = (K > 40) & (K < 160)

@@ -4,8 +4,11 @@ circle that keeps the curvature uniform; the lab reports the moment per
 width against the curvature and Kawabata's bending rigidity B, the slope
 between 0.5 and 1.5 /cm (gf cm^2/cm).
 
-Each jaw holds two vertex columns, so it fixes the slope, and the moving
-jaw is placed on the arc of curvature K with its tangent turned by K l.
+Each jaw holds two vertex columns, h/2 each side of its line, so it fixes
+the slope there (held on and behind the line, the strip would bend as if
+clamped h/2 behind each jaw, lengthening the bent part by h: B 1/(1 + h/l)
+too low; the Peirce test has the same clamp, peirce.py), and the moving jaw
+is placed on the arc of curvature K with its tangent turned by K l.
 Between jaws that hold the ends of a circular arc the equilibrium of a
 uniform strip is that arc, under a constant moment M = B K per width
 (pure bending, no shear force): the closed-form answer.  The moment comes
@@ -60,16 +63,18 @@ def scene(material: dict, resolution: str) -> dict:
     n = CELLS[resolution]
     h = GAP / n
     ny = max(3, int(round(WIDTH / h)) + 1)
+    # columns at -h/2 + k h, k = 0 .. n + 1: two held by each jaw
     K = np.linspace(0.0, MAX_CURVATURE, INCREMENTS + 1)
     translations, rotations = jaw_path(K)
     return {
         "scene": "lab_kes_bending",
         "cloth": [{"name": "specimen",
-                   "mesh": {"grid": {"size": [GAP + 2 * h, WIDTH], "resolution": [n + 3, ny],
+                   "mesh": {"grid": {"size": [GAP + h, WIDTH], "resolution": [n + 2, ny],
                                      "pattern": "alternating"},
                             "center": [GAP / 2, 0.0, 0.0]},
-                   "pins": [{"box": {"min": [-1.0, -1.0, -1.0], "max": [1e-9, 1.0, 1.0]}},
-                            {"box": {"min": [GAP - 1e-9, -1.0, -1.0], "max": [1.0, 1.0, 1.0]},
+                   "pins": [{"box": {"min": [-1.0, -1.0, -1.0], "max": [h / 2 + 1e-9, 1.0, 1.0]}},
+                            {"box": {"min": [GAP - h / 2 - 1e-9, -1.0, -1.0],
+                                     "max": [1.0, 1.0, 1.0]},
                              "motion": {"times": quasistatic.keyframes(K),
                                         "translations": translations, "rotations": rotations,
                                         "center": [GAP, 0.0, 0.0]}}],

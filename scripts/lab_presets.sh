@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# The fabric lab on every preset, 2 ranks, reports in docs/lab/: each preset
+# as it is (bending_model null: the per-hinge default) on standard specimens,
+# its bending tests again with the shell model, and the drape test on the
+# coarse specimen (the standard one takes 10-15 minutes a fabric).
+set -euo pipefail
+here=$(cd "$(dirname "$0")/.." && pwd)
+cd "$here"
+mkdir -p docs/lab
+presets=${*:-"cotton wool denim silk polyester_knit"}
+for p in $presets; do
+  scripts/mpiexec.sh 2 .venv/bin/distcloth lab "$p" --tests tensile shear bending peirce \
+    --output "docs/lab/$p.md"
+  scripts/mpiexec.sh 2 .venv/bin/distcloth lab "$p" --set bending_model=dihedral_shell \
+    --tests bending peirce --output "docs/lab/${p}_shell.md"
+  scripts/mpiexec.sh 2 .venv/bin/distcloth lab "$p" --tests cusick --resolution coarse \
+    --output "docs/lab/${p}_drape.md"
+done
