@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import quasistatic
-from .kes_tensile import CELLS, GAUGE, WIDTH, _direction_material
+from .kes_tensile import CELLS, GAUGE, WIDTH, direction_material
 from .units import GF_PER_CM
 
 MAX_ANGLE = 8.0                       # degrees
@@ -57,7 +57,7 @@ def scene(material: dict, resolution: str) -> dict:
                              "motion": {"times": quasistatic.keyframes(shift),
                                         "translations": [[0.0, float(d), 0.0]
                                                          for d in shift]}}],
-                   "material": _direction_material(material, "weft")}],
+                   "material": direction_material(material, "weft")}],
         "effects": ["membrane", "bending"],
         "time": quasistatic.time_settings(INCREMENTS),
         "solver": quasistatic.SOLVER,

@@ -46,7 +46,7 @@ class TensileResult:
     reason: str = ""
 
 
-def _direction_material(material: dict, direction: str) -> dict:
+def direction_material(material: dict, direction: str) -> dict:
     """The load runs along x; the weft lies along x for the weft test and
     across it for the warp test."""
     mat = dict(material)
@@ -68,7 +68,7 @@ def scene(material: dict, direction: str, resolution: str, max_strain: float) ->
                              "motion": {"times": quasistatic.keyframes(stretch),
                                         "translations": [[float(d), 0.0, 0.0]
                                                          for d in stretch]}}],
-                   "material": _direction_material(material, direction)}],
+                   "material": direction_material(material, direction)}],
         "effects": ["membrane", "bending"],
         "time": quasistatic.time_settings(INCREMENTS),
         "solver": quasistatic.SOLVER,

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from .cusick import CLAMP_RADIUS, PIXEL, SPECIMEN_RADIUS
+from .kes_shear import kawabata_g
 from .units import G_STANDARD as G
 from .units import GF_CM2_PER_CM, GF_CM_PER_CM2
 
@@ -77,7 +79,6 @@ def _law_section(title: str, r, value, rows, increments: int) -> str:
 
 
 def shear_section(r) -> str:
-    from .kes_shear import kawabata_g
     return _law_section("KES-FB1 shear (20 cm × 5 cm, to 8°)", r, r.g, [
         ("G (gf/cm/°)", kawabata_g(r.g), kawabata_g(r.g_law), ".4f"),
         ("G (N/m)", r.g, r.g_law, ".2f")], len(r.angle))
@@ -95,10 +96,10 @@ SECTIONS = {"tensile": tensile_section, "shear": shear_section, "bending": bendi
 
 def cusick_picture(r, path: str) -> None:
     """The shadow seen from above, with the specimen's and the disc's circles."""
+    # matplotlib only when a picture is drawn, without a display
     import matplotlib
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from .cusick import CLAMP_RADIUS, PIXEL, SPECIMEN_RADIUS
+    import matplotlib.pyplot as plt  # after use("Agg")
     half = 0.5 * r.shadow.shape[0] * PIXEL * 100
     fig, ax = plt.subplots(figsize=(4, 4), dpi=120)
     ax.imshow(r.shadow.T, origin="lower", extent=(-half, half, -half, half), cmap="Greys",
