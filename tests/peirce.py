@@ -17,7 +17,7 @@ c ~ B^(1/3)).
 Reference: B theta'' = -w (L - s) cos theta, theta(0) = 0, theta'(L) = 0
 (arc length s, theta the slope below horizontal), solved by scipy solve_bvp.
 The overhang at which the exact chord is at 41.5 deg, L*, depends on w and B
-only through w L^3 / B (= 8.41).
+only through w L^3 / B (= 8.004).
 
 Simulation: as tests/test_elastica.py (nearly inextensible membrane E = 1e3
 N/m, equilibrium by backward Euler with huge steps and Newton), the clamp

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..inprocess import build_simulation
-from ..integrate.drape import Relaxation, drape_converged
+from ..integrate.drape import Relaxation, drape_converged, relax_to_rest
 from ..simulation import SimulationError
 from .shadow import drape_coefficient, node_count, shadow_mask
 from .specimens import disc, write_obj
@@ -102,17 +102,11 @@ def run(material: dict, base_dir: str, comm, *, resolution: str | float = "stand
         return res
     try:
         spec = sim.cfg.drape
-        relax = Relaxation(sim, spec)
-        diag = {"residual": float("nan")}
-        for k in range(1, max_iterations + 1):
-            diag = relax.iterate()
-            res.iterations = k
-            if drape_converged(diag, spec):
-                res.converged = True
-                break
+        res.iterations, diag, _, stuck, _ = relax_to_rest(Relaxation(sim, spec), max_iterations)
         res.residual = float(diag["residual"])
+        res.converged = drape_converged(diag, spec)
         if not res.converged:
-            res.reason = f"not at rest after {max_iterations} iterations"
+            res.reason = stuck or f"not at rest after {max_iterations} iterations"
         area, union = shadow_area(sim)
         res.drape_coefficient = drape_coefficient(area, SPECIMEN_RADIUS, CLAMP_RADIUS)
         res.nodes = node_count(union, PIXEL, CLAMP_RADIUS)
