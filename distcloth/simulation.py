@@ -26,7 +26,9 @@ from .io.console import log
 from .linalg.assembly import (assemble_blocks, constraint_impulses, gershgorin_bound,
                               solve_constrained)
 from .linalg.constraints import Constraints, filter_system
+from .linalg.log_events import logged
 from .linalg.pattern import BlockPattern
+from .linalg.presets import choose as choose_solver
 from .linalg.petsc import (current_options, insert_scene_options, remove_options,
                            unused_options, unused_unprefixed_options)
 from .linalg.system import LinearSystem, SolverFailure
@@ -118,8 +120,11 @@ class Simulation:
         self.system = None
         if self.integrator.implicit:
             ls = cfg.linear_system
-            self.system = LinearSystem(lay, self.pattern, comm, ls.mat_type, ls.warm_start,
-                                       ls.pc_rebuild_every)
+            # the scene's solver: or, without one, the preset for its size
+            self.solver_choice = choose_solver(cfg.solver_options, ls.mat_type, ls.warm_start,
+                                               n_vertices, comm.size)
+            self.system = LinearSystem(lay, self.pattern, comm, self.solver_choice.mat_type,
+                                       self.solver_choice.warm_start, ls.pc_rebuild_every)
         self.pipeline = self._build_pipeline()
         self.ctx = StepContext(self.n_owned, self.mass, self.terms, self.pipeline, self.ghosts, comm)
         tc = cfg.time
@@ -201,9 +206,10 @@ class Simulation:
             self.check_explicit_step()
             _refuse_unprefixed_options()
             return
-        self._inserted_options = insert_scene_options(self.cfg.solver_options, self._cmdline)
+        chosen = self.solver_choice.options
+        self._inserted_options = insert_scene_options(chosen, self._cmdline)
         options = current_options()
-        if options.get("pc_type") == "gamg" and self.cfg.linear_system.mat_type == "baij":
+        if options.get("pc_type") == "gamg" and self.solver_choice.mat_type == "baij":
             # the scene's own gamg is refused with the config (rules.py): this one is the command line's
             raise ConfigError(command_line_key("pc_type"), "gamg", "gamg with an aij matrix: "
                               f"add -{OPTION_PREFIX}mat_type aij "
@@ -216,16 +222,17 @@ class Simulation:
             self.system.configure()
         except Exception as exc:   # PETSc error: a bad option value
             raise _solver_setup_error(exc, current_options(), self._cmdline) from None
+        defaults = DEFAULT_SOLVER if self.cfg.solver_options else chosen
         for name in unused_options():
-            if DEFAULT_SOLVER.get(name, object()) == self.cfg.solver_options.get(name):
+            if defaults.get(name, object()) == chosen.get(name):
                 continue   # a default the scene did not ask for (sub_pc_type with pc_type jacobi)
             where = command_line_key(name) if name in self._cmdline else f"solver.{name}"
-            value = self.cfg.solver_options.get(name, "")
+            value = chosen.get(name, "")
             raise ConfigError(where, value, "not an option of the configured solver "
                               "(PETSc did not use it: misspelt, or for another solver type)"
                               + _EQUALS_HINT * ("=" in name))
         _refuse_unprefixed_options()
-        self.say(f"solver: {self.system.describe()}")
+        self.say(f"solver: {self.system.describe()} ({self.solver_choice.describe()})")
 
     def stiffness_bound(self) -> float:
         """Gershgorin bound of lambda_max(M^-1 K) at the rest state over all
@@ -521,7 +528,8 @@ class Simulation:
                           f"time.newton_tolerance = {self.cfg.time.newton_tolerance:g})"), False
         saved = state.snapshot()
         pipe.run("update", result)
-        reason, result.energies = self._check_state()
+        with logged("health"):
+            reason, result.energies = self._check_state()
         if reason:
             state.restore(saved)
             return None, reason, False

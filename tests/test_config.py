@@ -116,8 +116,9 @@ def test_defaults_fill_everything_not_given(tmp_path):
         cloth=(ClothSpec(name="piece0", mesh=MeshSpec(grid=GridSpec((1.0, 2.0), (3, 4)))),))
     assert config.cloth[0].mesh.grid.pattern == "alternating"
     assert config.cloth[0].material.shear_stiffness == 1.0
-    assert config.solver_options == {"ksp_type": "cg", "pc_type": "bjacobi",
-                                      "sub_pc_type": "sor", "ksp_rtol": 1e-5}
+    # no solver: section: the preset by problem size (linalg/presets.py) decides
+    assert config.solver_options == {}
+    assert config.linear_system.mat_type is None and config.linear_system.warm_start is None
 
 
 def test_null_sections_mean_defaults(tmp_path):
@@ -604,8 +605,9 @@ def test_linear_system_is_read_and_gamg_takes_aij(scene_dir):
     config = config_from_dict(raw, str(scene_dir), "x.yaml")
     assert config.linear_system == LinearSystemSpec("aij", True, 4)
     assert "mat_type" not in config.solver_options and config.solver_options["pc_type"] == "gamg"
+    # unset: the solver preset by size decides (linalg/presets.py)
     assert config_from_dict(base_scene(), str(scene_dir), "x.yaml").linear_system == \
-        LinearSystemSpec("baij", False, 1)
+        LinearSystemSpec(None, None, 1)
 
 
 def test_command_line_options_set_linear_system_and_win(scene_dir):

@@ -24,5 +24,9 @@ def test_log_view_lists_the_stages(tmp_path):
         found = re.search(rf"^{re.escape(name)} +(\d+) ", events, re.M)
         assert found, f"{name} not in -log_view:\n{events}"
         assert calls is None or int(found.group(1)) == calls, found.group(0)
+    # the solve's parts and the health check have their own events
+    for name in ("solve:filter", "solve:set_values", "solve:check", "health"):
+        found = re.search(rf"^{re.escape(name)} +(\d+) ", events, re.M)
+        assert found and int(found.group(1)) == 3, f"{name} not in -log_view:\n{events}"
     # a stage the scene does not have is no event with calls
     assert not re.search(r"^force:sewing +[1-9]", events, re.M)

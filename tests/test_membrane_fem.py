@@ -326,3 +326,43 @@ def test_compression_branch_forces_and_hessian_exact():
     # the branch switch at e = 0 is a kink of the second derivative; no element
     # strain of this state lies within the differencing step of it
     assert np.abs(-A - J).max() <= RTOL * np.abs(J).max()
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_projection_is_the_eigenvalue_clamp(model):
+    """The kernel's split 4 + 2 Jacobi projection gives LAPACK's clamp of
+    every element's 6x6 Hessian, also on compressed, wrinkled triangles."""
+    rng = np.random.default_rng(5)
+    X, tris, weft = curved_rest(rng)
+    args = (tris, X, weft, material(), model, np.ones(len(tris)))
+    exact, proj = MembraneFEMTerm(*args, project=False), MembraneFEMTerm(*args, project=True)
+    x = 0.8 * X + 0.1 * rng.normal(size=X.shape)
+    for t in (exact, proj):
+        t.evaluate(x, None, np.zeros((len(X), 3)), True)
+    H = 0.5 * (exact.hr + exact.hr.transpose(0, 2, 1))
+    w, V = np.linalg.eigh(H)
+    own = np.abs(H).max(axis=(1, 2))
+    assert (w.min(axis=1) < -1e-3 * own).sum() > len(H) // 4     # the premise: many to clamp
+    clamp = np.einsum("eik,ek,ejk->eij", V, np.maximum(w, 0.0), V)
+    # 1e-9: the kernel keeps elements its PSD pre-test admits with eigenvalues
+    # down to -1e-10 |C| A; the eigensolvers' own round-off is ~1e-15
+    assert np.all(np.abs(proj.hr - clamp).max(axis=(1, 2)) <= 1e-9 * own)
+
+
+def test_a_repeated_evaluation_reuses_the_last_one_only_at_the_same_x():
+    rng = np.random.default_rng(6)
+    X, tris, weft = curved_rest(rng)
+    term = MembraneFEMTerm(tris, X, weft, material(), "stvk", np.ones(len(tris)))
+    fresh = MembraneFEMTerm(tris, X, weft, material(), "stvk", np.ones(len(tris)))
+    x = 0.9 * X + 0.05 * rng.normal(size=X.shape)
+    f1, f2 = np.zeros_like(x), np.zeros_like(x)
+    term.evaluate(x, None, f1, True)
+    term.evaluate(x, None, f2, True)                  # served again, added again
+    assert np.array_equal(f1, f2)
+    assert term.energy(x) == fresh.energy(x)
+    x[3] += 1e-3                                      # moved in place: a new evaluation
+    f3, f4 = np.zeros_like(x), np.zeros_like(x)
+    term.evaluate(x, None, f3, True)
+    fresh.evaluate(x, None, f4, True)
+    assert np.array_equal(f3, f4) and np.array_equal(term.hr, fresh.hr)
+    assert term.max_strain(x) == fresh.max_strain(x)

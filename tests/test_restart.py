@@ -38,6 +38,7 @@ colliders:
   - {name: ball, shape: sphere, center: [0.0, 0.0, 0.25], radius: 0.25, friction: 0.3}
   - {name: floor, shape: plane, normal: [0.0, 0.0, 1.0], offset: 0.0, friction: 0.3}
 time: {end: 0.3, step: 0.005, integrator: bdf2}
+solver: {ksp_rtol: 1.0e-5}
 output: {file: out.h5, every: 0.05, preview: false}
 """
 STEPS = 60

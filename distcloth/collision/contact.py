@@ -49,7 +49,6 @@ import numpy as np
 from ..parallel.collide import build_collisions
 from ..config.schema import ConfigError
 from ..physics.contact_friction import ContactFrictionTerm
-from ..scene.animated_body import load_animated_collider, reachable_part
 from .colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane, RigidMotion,
                         Sphere, load_collider_mesh)
 from .image_collider import ImageSpaceCollider
@@ -129,6 +128,8 @@ def make_collider(spec, implicit: bool, key: str = "colliders", garment_points=N
         if spec.method == "image" and spec.animation.reach is not None:
             raise ConfigError(f"{key}.animation.reach", spec.animation.reach,
                               "null with method: image (the maps are of the whole body)")
+        # the body rig (BVH, skinning, retargeting: 0.3 s of imports) only for animated bodies
+        from ..scene.animated_body import load_animated_collider
         mesh = load_animated_collider(spec, key, motion)
         drive_end = max(drive_end, mesh.drive_end)
     else:
@@ -143,6 +144,8 @@ def make_collider(spec, implicit: bool, key: str = "colliders", garment_points=N
     region, drawn = None, mesh
     if spec.animation is not None and spec.animation.reach is not None and garment_points is not None:
         # the contact sees only the part in reach; pictures and output the whole body
+        # the body rig's imports only for animated bodies (see above)
+        from ..scene.animated_body import reachable_part
         mesh, region = reachable_part(mesh, garment_points, spec.animation.reach)
     prox = MeshProximity(mesh)
     return Collider(kind="mesh", query=prox.query, body=drawn, law=friction_law("mesh", implicit),

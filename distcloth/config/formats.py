@@ -121,6 +121,8 @@ def read_petsc_options(value: Any, key: str, ctx: Any) -> tuple[tuple[str, Any],
     Whether PETSc knows an option is checked later, by the solver code."""
     if not isinstance(value, dict):
         raise ConfigError(key, value, PETSC_OPTIONS_TEXT)
+    if not value:     # solver: {} says no more than no section: the size preset
+        return ()
     moved = {e.key for e in entries(LinearSystemSpec)}
     options = dict(DEFAULT_SOLVER)
     for name, entry in value.items():

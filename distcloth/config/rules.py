@@ -271,7 +271,7 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
         raise ConfigError("output.every", config.output.every,
                           f"a number >= time.step ({config.time.step:g}): frames cannot be more "
                           "frequent than steps")
-    if config.solver_options.get("pc_type") == "gamg" and config.linear_system.mat_type == "baij":
+    if config.solver_options.get("pc_type") == "gamg" and config.linear_system.mat_type != "aij":
         raise ConfigError("linear_system.mat_type", "baij", "aij with solver.pc_type: gamg "
                           "(PETSc's GAMG cannot build its graph from a BAIJ matrix, the "
                           "default)")

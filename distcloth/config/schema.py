@@ -592,9 +592,11 @@ class LinearSystemSpec:
     """distcloth's own settings of the implicit solve (the PETSc options are under
     solver:). On the command line: -distcloth_<key> <value>, e.g.
     -distcloth_mat_type aij."""
-    mat_type: str = choice("baij", MAT_TYPES, doc="PETSc matrix type, block size 3 either way "
-                           "(PETSc's GAMG needs aij)")
-    warm_start: bool = setting(False, doc="start each solve from the previous step's solution")
+    mat_type: str | None = choice(None, MAT_TYPES, doc="PETSc matrix type, block size 3 either "
+                                  "way (PETSc's GAMG needs aij); null: the size preset's without "
+                                  "a solver: section, else baij")
+    warm_start: bool | None = setting(None, doc="start each solve from the previous step's "
+                                      "solution; null: on without a solver: section, off with one")
     pc_rebuild_every: int = setting(1, doc="rebuild the preconditioner every k-th solve, reuse "
                                     "it in between", at_least=1)
 
@@ -716,9 +718,12 @@ class SceneConfig:
                           at_least=0)
     time: TimeSpec = section(TimeSpec, doc="time stepping")
     solver: tuple[tuple[str, Any], ...] = setting(
-        tuple(DEFAULT_SOLVER.items()), doc="PETSc options without the leading '-' and without "
+        (), doc="PETSc options without the leading '-' and without "
         f"the prefix {OPTION_PREFIX}, which distcloth adds (ksp_rtol: 1e-8 is "
-        f"-{OPTION_PREFIX}ksp_rtol 1e-8); they replace or extend the defaults", read="petsc_options")
+        f"-{OPTION_PREFIX}ksp_rtol 1e-8); they replace or extend the defaults "
+        f"{dict(DEFAULT_SOLVER)}; no solver: section: CG with a preconditioner chosen by "
+        "problem size, ksp_rtol 1e-3 and warm start (distcloth/linalg/presets.py)",
+        read="petsc_options")
     linear_system: LinearSystemSpec = section(LinearSystemSpec, doc="distcloth's own settings "
                                               "of the linear solve")
     output: OutputSpec = section(OutputSpec, doc="the result file")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .constraints import Constraints, filter_system
+from .log_events import logged
 
 
 def assemble_blocks(pattern, mass_owned: np.ndarray, terms, alpha: float, beta: float,
@@ -42,8 +43,10 @@ def solve_constrained(system, pattern, data: np.ndarray, rhs: np.ndarray, cons: 
     """dv on the owned rows solving A dv = rhs under the constraints (pre-filtered
     CG: constraints.py), starting from the velocity change ``guess`` if given,
     and the solve's information."""
-    fdata, frhs = filter_system(pattern, data, rhs, cons)
-    system.set_values(fdata)
+    with logged("solve:filter"):
+        fdata, frhs = filter_system(pattern, data, rhs, cons)
+    with logged("solve:set_values"):
+        system.set_values(fdata)
     owned = cons.index < pattern.n_owned
     y0 = None
     if guess is not None:                 # the filtered unknown is dv - z

@@ -42,8 +42,11 @@ def filter_system(pattern, data: np.ndarray, rhs: np.ndarray, cons: Constraints)
     if cons.index.size == 0:
         return data, rhs
     n_owned, n_local = pattern.n_owned, pattern.n_local
-    z = cons.dense_z(n_local)
-    Az = (pattern.local_matrix(data) @ z.ravel()).reshape(n_owned, 3)
+    if np.any(cons.z):
+        z = cons.dense_z(n_local)
+        Az = (pattern.local_matrix(data) @ z.ravel()).reshape(n_owned, 3)
+    else:    # pins at rest, resting contacts: no matrix product to build
+        Az = 0.0
     slot = np.full(n_local, -1, dtype=np.int64)
     slot[cons.index] = np.arange(cons.index.size)
     out = data.copy()

@@ -1,8 +1,15 @@
 """The step's stages as PETSc log events, so ``-log_view`` times them
 beside PETSc's own (KSPSolve, MatAssemblyEnd, ...) under the stage names
 of distcloth/stages.py.  Events are registered once per process; their
-begin/end cost a few counters, so every stage call is wrapped."""
+begin/end cost a few counters, so every stage call is wrapped.
+
+Work inside a stage or between stages that is worth seeing on its own has
+an event too (``logged``): the solve's constraint filter, its insertion of
+the values into PETSc and its true-residual check, and the health check
+after the update (energies, strain, speed)."""
 from __future__ import annotations
+
+from contextlib import contextmanager
 
 from .petsc import petsc
 
@@ -15,3 +22,14 @@ def stage_event(name: str):
     if event is None:
         event = _events[name] = petsc().Log.Event(name)
     return event
+
+
+@contextmanager
+def logged(name: str):
+    """Time the block as the PETSc log event ``name``."""
+    event = stage_event(name)
+    event.begin()
+    try:
+        yield
+    finally:
+        event.end()

@@ -11,6 +11,8 @@ tutorial, Part 1 §5.7, with a float32 matrix (distcloth/linalg/sgs32.py).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 PRECONDITIONERS = {
     # name: (solver options, linear_system.mat_type)
     "jacobi": ({"pc_type": "jacobi"}, "baij"),
@@ -24,3 +26,51 @@ PRECONDITIONERS = {
                "pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
                "pc_hypre_boomeramg_P_max": 4, "pc_hypre_boomeramg_strong_threshold": 0.7}, "aij"),
 }
+
+
+# The defaults of a scene that writes no solver: section, by problem size
+# (docs/benchmarks.md, "Per-iteration overhead, ... and defaults by size";
+# scripts/bench_defaults.py).  GAMG's few iterations pay for its set-up
+# from GAMG_FROM_VERTICES[ranks] vertices on; below, block-Jacobi SGS on
+# BAIJ is cheaper per step.  On two or more ranks the crossover comes
+# earlier: block Jacobi weakens with every block more and each CG iteration
+# waits for the other ranks (a reduction, a ghost exchange).  ksp_rtol: CG
+# stops at 1e-3 of |b|, with the previous solve as the start (warm start):
+# on the hanging square that moved positions by a few mm against a 1e-8
+# solve, against 73 mm of time-stepping error at 5 ms, for half the CG
+# iterations of 1e-3 from zero.
+GAMG_FROM_VERTICES = {1: 50000, 2: 20000}
+DEFAULT_RTOL = 1.0e-3
+
+
+@dataclass(frozen=True)
+class SolverChoice:
+    """The solve a scene gets: PETSc options (without prefix), matrix type,
+    warm start, and the preset's name if the problem size chose it."""
+    options: dict
+    mat_type: str
+    warm_start: bool
+    preset: str | None = None
+
+    def describe(self) -> str:
+        return f"{self.preset}, chosen by problem size" if self.preset else "the scene's solver:"
+
+
+def by_size(n_vertices: int, ranks: int) -> str:
+    """The preconditioner (a PRECONDITIONERS name) for a cloth of this many
+    vertices on this many ranks."""
+    return "gamg" if n_vertices >= GAMG_FROM_VERTICES[min(ranks, 2)] else "bjacobi_sgs"
+
+
+def choose(solver: dict, mat_type: str | None, warm_start: bool | None,
+           n_vertices: int, ranks: int) -> SolverChoice:
+    """The scene's own ``solver:`` options if it wrote any (``solver`` not
+    empty; then BAIJ and no warm start unless ``linear_system`` says so),
+    else the preset by size.  An explicit ``linear_system.mat_type`` is kept
+    either way: BAIJ forces block-Jacobi SGS (GAMG needs AIJ)."""
+    if solver:
+        return SolverChoice(dict(solver), mat_type or "baij", bool(warm_start))
+    name = by_size(n_vertices, ranks) if mat_type != "baij" else "bjacobi_sgs"
+    options, preset_mat = PRECONDITIONERS[name]
+    return SolverChoice({"ksp_type": "cg", **options, "ksp_rtol": DEFAULT_RTOL},
+                        mat_type or preset_mat, True if warm_start is None else warm_start, name)

@@ -1,0 +1,62 @@
+"""The solver a scene gets: by problem size without a solver: section
+(distcloth/linalg/presets.py), the scene's own with one."""
+import pytest
+
+from distcloth.linalg import presets
+from distcloth.linalg.petsc import PREFIX
+from test_physics import grid_scene, make_sim
+
+
+@pytest.mark.parametrize("ranks", [1, 2, 3])
+def test_by_size_switches_to_gamg_at_the_measured_crossover(ranks):
+    at = presets.GAMG_FROM_VERTICES[min(ranks, 2)]
+    assert presets.by_size(at - 1, ranks) == "bjacobi_sgs"
+    assert presets.by_size(at, ranks) == "gamg"
+    # more ranks never move the switch to larger problems
+    assert presets.GAMG_FROM_VERTICES[2] <= presets.GAMG_FROM_VERTICES[1]
+
+
+def test_choose_keeps_what_the_scene_says():
+    own = presets.choose({"ksp_type": "cg", "pc_type": "jacobi"}, None, None, 10 ** 6, 2)
+    assert own.preset is None and own.options["pc_type"] == "jacobi"
+    assert own.mat_type == "baij" and own.warm_start is False
+    # no solver: but an explicit BAIJ matrix: GAMG cannot take it
+    baij = presets.choose({}, "baij", False, 10 ** 6, 2)
+    assert baij.preset == "bjacobi_sgs" and baij.mat_type == "baij" and not baij.warm_start
+
+
+def _solver(sim):
+    ksp = sim.system.ksp
+    return ksp.getPC().getType(), sim.system.mat_type, sim.system.warm_start, ksp.getTolerances()[0]
+
+
+def test_a_scene_without_solver_gets_the_size_preset(monkeypatch):
+    raw = grid_scene()
+    del raw["solver"]
+    sim = make_sim(raw)
+    try:
+        assert _solver(sim) == ("bjacobi", "baij", True, presets.DEFAULT_RTOL)
+        assert sim.solver_choice.preset == "bjacobi_sgs"
+    finally:
+        sim.destroy()
+    # the same 81-vertex scene above a (lowered) crossover: GAMG on AIJ
+    monkeypatch.setattr(presets, "GAMG_FROM_VERTICES", {1: 10, 2: 10})
+    sim = make_sim(raw)
+    try:
+        assert _solver(sim) == ("gamg", "aij", True, presets.DEFAULT_RTOL)
+        sim.step()
+    finally:
+        sim.destroy()
+
+
+def test_an_explicit_solver_section_overrides_the_preset(monkeypatch):
+    monkeypatch.setattr(presets, "GAMG_FROM_VERTICES", {1: 10, 2: 10})
+    sim = make_sim(grid_scene(solver={"ksp_rtol": 1e-7, "pc_type": "jacobi"}))
+    try:
+        assert _solver(sim) == ("jacobi", "baij", False, 1e-7)
+        assert sim.solver_choice.preset is None
+    finally:
+        sim.destroy()
+    # and the scene's options are taken out again: the next scene gets its own
+    from distcloth.linalg.petsc import petsc
+    assert not petsc().Options().hasName(PREFIX + "pc_type")
