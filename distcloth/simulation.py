@@ -121,8 +121,9 @@ class Simulation:
         if self.integrator.implicit:
             ls = cfg.linear_system
             # the scene's solver: or, without one, the preset for its size
-            self.solver_choice = choose_solver(cfg.solver_options, ls.mat_type, ls.warm_start,
-                                               n_vertices, comm.size)
+            self.solver_choice = choose_solver(
+                cfg.solver_options, ls.mat_type, ls.warm_start, n_vertices, comm.size,
+                contact=cfg.has("collisions") or cfg.has("self_collision"))
             self.system = LinearSystem(lay, self.pattern, comm, self.solver_choice.mat_type,
                                        self.solver_choice.warm_start, ls.pc_rebuild_every)
         self.pipeline = self._build_pipeline()

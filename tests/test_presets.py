@@ -60,3 +60,11 @@ def test_an_explicit_solver_section_overrides_the_preset(monkeypatch):
     # and the scene's options are taken out again: the next scene gets its own
     from distcloth.linalg.petsc import petsc
     assert not petsc().Options().hasName(PREFIX + "pc_type")
+
+
+def test_contact_scenes_keep_the_tighter_tolerance():
+    # the penetration bounds of the collision tests were measured at 1e-5
+    assert presets.choose({}, None, None, 1000, 1, contact=True).options["ksp_rtol"] == \
+        presets.CONTACT_RTOL
+    assert presets.choose({}, None, None, 1000, 1).options["ksp_rtol"] == presets.DEFAULT_RTOL
+    assert presets.CONTACT_RTOL < presets.DEFAULT_RTOL

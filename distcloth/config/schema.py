@@ -722,7 +722,8 @@ class SceneConfig:
         f"the prefix {OPTION_PREFIX}, which distcloth adds (ksp_rtol: 1e-8 is "
         f"-{OPTION_PREFIX}ksp_rtol 1e-8); they replace or extend the defaults "
         f"{dict(DEFAULT_SOLVER)}; no solver: section: CG with a preconditioner chosen by "
-        "problem size, ksp_rtol 1e-3 and warm start (distcloth/linalg/presets.py)",
+        "problem size, ksp_rtol 1e-3 (1e-5 with collisions) and warm start "
+        "(distcloth/linalg/presets.py)",
         read="petsc_options")
     linear_system: LinearSystemSpec = section(LinearSystemSpec, doc="distcloth's own settings "
                                               "of the linear solve")
