@@ -346,10 +346,13 @@ def main(argv=None) -> int:
     p.add_argument("--peers-dir", type=Path, default=default_peers_dir(),
                    help="the peer harness (default: ../shared/peers next to the repository, "
                         "the main checkout's for a git worktree)")
-    p.add_argument("--rerun", action="store_true", help="time every setting again (references stay cached)")
+    p.add_argument("--rerun", action="store_true",
+                   help="time every setting again (references stay cached)")
     p.add_argument("--no-references", action="store_true", help="never start a reference run")
-    p.add_argument("--setup-only", action="store_true", help="install Blender and the Warp/Newton venv, then stop")
-    p.add_argument("--report-only", action="store_true", help="write docs/peers.md and the plot from the cache")
+    p.add_argument("--setup-only", action="store_true",
+                   help="install Blender and the Warp/Newton venv, then stop")
+    p.add_argument("--report-only", action="store_true",
+                   help="write docs/peers.md and the plot from the cache")
     a = p.parse_args(argv)
     a.peers_dir = a.peers_dir.resolve()
     if not (a.peers_dir / "scenes.py").exists():

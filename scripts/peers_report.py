@@ -159,8 +159,8 @@ def _ratios(rows):
             continue
         match = [d for d in ours if d["error"] <= p["error"]]
         if not match:
-            lines.append(f"| {p['tool']} {p['label']} | {_mm(p['error'])} | {p['wall']:.2f} | no distcloth setting "
-                         f"measured reaches this error | | | |")
+            lines.append(f"| {p['tool']} {p['label']} | {_mm(p['error'])} | {p['wall']:.2f} | "
+                         f"no distcloth setting measured reaches this error | | | |")
             continue
         d = min(match, key=lambda r: r["wall"])
         ratio, ratio_p = p["wall"] / d["wall"], p["wall"] / d["process"]
@@ -172,7 +172,7 @@ def _ratios(rows):
     return "\n".join(lines), best
 
 
-def _plot(scenes_rows, path: Path):
+def _plot(scenes_rows, path: Path, note: str):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -206,6 +206,7 @@ def _plot(scenes_rows, path: Path):
         ax.set_ylabel("error mm (RMS vs own reference)")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
+    fig.suptitle(note, fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -250,7 +251,9 @@ def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
     (root / "docs" / "peers.md").write_text("\n".join(text))
     for part in text[3:-1]:          # the scenes' tables, also on the console
         print(part)
-    _plot(scenes_rows, root / "docs" / "pictures" / "peers_pareto.png")
+    _plot(scenes_rows, root / "docs" / "pictures" / "peers_pareto.png",
+          f"1-minute load before the runs {min(loads, default=0):.1f}-{max(loads, default=0):.1f} "
+          f"on {machine['cores']} cores")
     print(f"wrote {root / 'docs' / 'peers.md'} and docs/pictures/peers_pareto.png", flush=True)
 
 
@@ -258,7 +261,7 @@ COMMANDS = """\
 ## Commands
 
 ```
-.venv/bin/python scripts/bench_peers.py --setup-only          # Blender from Debian, Warp + Newton in out/peers/venv
+.venv/bin/python scripts/bench_peers.py --setup-only      # Blender (Debian), Warp + Newton (out/peers/venv)
 .venv/bin/python scripts/bench_peers.py --scenes S1-41 --repeats 1
 .venv/bin/python scripts/bench_peers.py --rerun --repeats 3   # all scenes, idle machine
 .venv/bin/python scripts/bench_peers.py --report-only         # this page from out/peers/
