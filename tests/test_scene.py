@@ -1,6 +1,7 @@
 """Scene building: grids, mesh files, material mapping, pins, placement."""
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 
@@ -9,6 +10,7 @@ import pytest
 
 from distcloth.config.schema import (ClothSpec, ConfigError, GridSpec, MaterialSpec, MeshSpec,
                                      PinSpec, SceneConfig)
+from distcloth.config.load import config_from_dict
 from distcloth.model import FLEXION, SHEAR, STRUCTURAL
 from distcloth.scene import build_model
 from distcloth.scene.grid import grid_springs, grid_triangles, grid_vertices
@@ -136,6 +138,27 @@ def test_grid_mass_and_area_lumping(pattern):
         third = np.bincount(tri.ravel(), weights=np.repeat(tri_area / 3, 3))
         interior = ~on_u_edge & ~on_v_edge
         np.testing.assert_allclose(model.vertex_area[interior], third[interior], rtol=1e-12)
+
+
+def test_uniform_mass_lumping_splits_the_piece_mass_equally():
+    """mass_lumping: uniform gives every vertex density * area / n (the peers'
+    lumping), the same total as area lumping; a second piece keeps its own."""
+    size, (nu, nv), density = (0.9, 0.6), (10, 7), 0.25
+    uniform = dataclasses.replace(grid_cloth(size=size, resolution=(nu, nv),
+                                             material=MaterialSpec(density=density)),
+                                  mass_lumping="uniform")
+    other = grid_cloth(resolution=(3, 3), center=(5.0, 0.0, 0.0), name="other")
+    model = build_model(scene(uniform, other))
+    mass = model.vertex_mass[:nu * nv]
+    np.testing.assert_allclose(mass, density * size[0] * size[1] / (nu * nv), rtol=1e-12)
+    np.testing.assert_allclose(model.vertex_mass[nu * nv:], 0.1 * model.vertex_area[nu * nv:],
+                               rtol=1e-12)
+    # the corners would carry a quarter of an interior vertex's mass with area lumping
+    assert abs(mass[0] - mass[nu + 1]) < 1e-15
+    raw = {"cloth": [{"mesh": {"grid": {"size": [1, 1], "resolution": [3, 3]}},
+                      "mass_lumping": "equal"}]}
+    with pytest.raises(ConfigError, match=r"cloth\[0\]\.mass_lumping|mass_lumping"):
+        config_from_dict(raw, ".", "s.yaml")
 
 
 def test_spring_damping_is_damping_times_stiffness():

@@ -36,6 +36,7 @@ GRID_PATTERNS = ("regular", "alternating")
 GRID_EDGES = ("left", "right", "bottom", "top")
 GRID_CORNERS = ("bottom_left", "bottom_right", "top_left", "top_right")
 MATERIAL_MODELS = ("mass_spring", "fem")
+MASS_LUMPINGS = ("area", "uniform")
 STRAIN_MODELS = ("stvk", "corotated")
 BENDING_MODELS = ("flexion", "dihedral", "isometric", "dihedral_shell", "isometric_shell")
 MAT_TYPES = ("baij", "aij")
@@ -317,6 +318,10 @@ class ClothSpec:
     material: MaterialSpec = section(MaterialSpec, doc="the material")
     thickness: float = setting(0.001, doc="contact offset of the cloth against colliders and "
                                "itself", unit="m", at_least=0)
+    mass_lumping: str = choice("area", MASS_LUMPINGS, doc="area: each vertex carries density "
+                               "times its lumped area; uniform: density times the piece's area, "
+                               "split equally over its vertices (what Blender and Newton do, "
+                               "for comparisons with them)")
     start_noise: StartNoiseSpec = section(StartNoiseSpec, doc="out-of-plane noise of the start "
                                           "positions")
     layer: int = setting(0, doc="pattern pieces worn together: 0 innermost; a piece of layer k "

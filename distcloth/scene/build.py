@@ -52,7 +52,8 @@ def build_model(cfg: SceneConfig) -> Model:
     """The Model of a scene: pieces concatenated in order (vertex and
     triangle indices offset), pins as sorted unique global indices.
 
-    Lumped mass = density * vertex area.  Mesh files: a third of each
+    Lumped mass = density * vertex area (or the piece's mass split equally
+    with mass_lumping: uniform).  Mesh files: a third of each
     adjacent triangle.  Grids: a quarter of each adjacent cell, uniform over
     the interior whatever the triangle pattern (a third of each triangle
     would give the alternating pattern's 8- and 4-triangle vertices 4/3 and
@@ -107,7 +108,7 @@ def build_model(cfg: SceneConfig) -> Model:
     damping = np.concatenate([np.full(piece.springs.shape[0], spec.material.damping)
                               for spec, piece in zip(cfg.cloth, pieces)]) * stiffness
     vertex_area = np.concatenate([piece.vertex_area for piece in pieces])
-    vertex_mass = np.concatenate([spec.material.density * piece.vertex_area
+    vertex_mass = np.concatenate([_lumped_mass(spec, piece)
                                   for spec, piece in zip(cfg.cloth, pieces)])
     rest_length = np.linalg.norm(positions[springs[:, 1]] - positions[springs[:, 0]], axis=1)
     if any(piece.garment is not None for piece in pieces):
@@ -312,6 +313,16 @@ def _grid_piece(spec: ClothSpec, bending_active: bool, key: str) -> _Piece:
         pinned=np.zeros(0, dtype=np.int64), grid_resolution=resolution,
         flexion_lines=(gridlib.grid_flexion_lines(resolution) if bending_active
                        else np.zeros((0, 3), dtype=np.int64)))
+
+
+def _lumped_mass(spec, piece) -> np.ndarray:
+    """The piece's vertex masses: density times each vertex's lumped area, or
+    (mass_lumping: uniform) the piece's whole mass split equally over its
+    vertices; the total is density times the piece's area either way."""
+    area = piece.vertex_area
+    if spec.mass_lumping == "uniform":
+        return np.full(area.shape[0], spec.material.density * area.sum() / area.shape[0])
+    return spec.material.density * area
 
 
 def _triangle_lumped_area(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:

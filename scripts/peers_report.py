@@ -1,0 +1,287 @@
+"""docs/peers.md and docs/pictures/peers_pareto.png from the runs cached by
+scripts/bench_peers.py (out/peers/runs/, out/peers/ref/)."""
+from __future__ import annotations
+
+import json
+import statistics
+from collections import defaultdict
+from pathlib import Path
+
+TOOL_NAMES = {"blender": "Blender 3.4.1", "newton": "Newton 1.8 VBD (Warp 1.19, CPU)",
+              "distcloth": "distcloth (2 ranks)"}
+SCENE_TITLES = {"S1-41": "S1 hanging square, 41 x 41", "S1-101": "S1 hanging square, 101 x 101",
+                "S2-81": "S2 tablecloth on a sphere, 81 x 81"}
+
+INTRO = """\
+# distcloth next to Blender and Newton
+
+Written by `scripts/bench_peers.py` (do not edit by hand: rerun it, or
+`--report-only` to rewrite this page from the cached runs).  The scenes are
+those of the peer harness (`/work/shared/peers`: README.md, scenes.py,
+results.md); distcloth runs the same scenes from `configs/bench/`.
+
+**What is compared.**  Each tool runs a few settings (Blender: cloth quality,
+i.e. implicit steps per 1/60 s frame; Newton: VBD substeps per frame, 10
+iterations; distcloth: integrator and step, CG to ksp_rtol 1e-3, 2 MPI ranks).
+For each: the wall time of the stepping loop per simulated second, and the
+error, the RMS vertex distance over t = 0.5, 1, 1.5 and 2 s against **the
+tool's own converged reference** (Blender quality 160, Newton 20 substeps,
+distcloth BDF-2 at 1 ms with ksp_rtol 1e-8).  Errors therefore measure how far
+each tool's cheap settings are from what that tool converges to, not whether
+the tools agree with each other; the physical figures (stretch, lowest point,
+gap to the sphere) show the latter.
+
+**Scene settings** (`configs/bench/*.yaml`, and why):
+- vertex order `j*n + i`, x fastest, the whole edge x = 0 pinned (S1), as the harness;
+  positions of every tool are mapped with `scenes.canonical_order`;
+- membrane: FE triangles (`model: fem`, Green strain), the model of Newton, the only peer whose
+  membrane law is given in SI units (Newton's `tri_ke = tri_ka = 1000` N/m are the Lamé moduli
+  mu and lambda of its triangles: Y = 4 mu (mu + lambda) / (2 mu + lambda) = 2666.7 N/m,
+  nu = 1/3, G = mu = 1000 N/m).  Blender's springs are mapped from 1000 N/m only to an order of
+  magnitude (harness README), so no spring material would match it better;
+- Newton cuts every grid quad along the other diagonal than distcloth's `regular` pattern: the
+  mirror image in y, which these y-symmetric scenes do not tell apart;
+- masses uniform, density * area / N per vertex (`mass_lumping: uniform`), as both peers;
+  distcloth's default (area lumping) would give edge and corner vertices half and a quarter
+  of an interior vertex's mass;
+- bending: dihedral, B = 1e-6 N m (Newton: `edge_ke = 1e-3` per unit hinge length, a few
+  1e-6 N m at these spacings; the bending length (B / (rho g))^(1/3) is ~1 cm, small
+  against the 0.5-1 m cloth);
+- no damping: Newton's `tri_kd = 0.01` against mu = 1000 N/m is a relaxation time of
+  ~1e-5 s, negligible; Blender keeps its default spring damping ratios (harness);
+- S2 contact: offset 5 mm (Newton's `particle_radius`), Coulomb friction 0.5 (Newton's
+  `soft_contact_mu`) on sphere and floor; Blender rests ~30 mm off (its collision distance
+  15 mm + collider thickness 20 mm), so gaps differ by settings, not accuracy.
+
+**Timing.**  Blender and Newton: the harness's own stepping-loop timers (Blender uses both
+cores; Warp's CPU backend one thread).  distcloth: the loop over the steps (run's
+`write_steps`) minus its output stage (HDF5 frames every 20 ms; the peers' per-frame
+position reads are outside their timers too), and, separately, the whole process
+(`mpiexec` start, imports, numba cache load, set-up, partition, output).  The runs are
+interleaved across tools (A, B, C, A, B, C) so that a change of machine load hits all
+three; the 1-minute load average before each run is recorded.  Newton's graph replay needs
+an even substep count, so 6 substeps stand in for 5.  How the peers' positions at the four
+times are read: Blender's point cache after the run (untimed), Newton's state after the
+wanted frames' replays (a hook measured at < 1 ms per run).
+"""
+
+
+def _records(folder: Path):
+    """The run records in folder/<scene>/ (not distcloth's timing files)."""
+    for path in sorted(folder.glob("*/*.json")):
+        if not path.name.endswith(".timing.json"):
+            yield json.loads(path.read_text())
+
+
+def _load(out: Path):
+    runs = defaultdict(list)
+    for rec in _records(out / "runs"):
+        runs[(rec["scene"], rec["tool"], rec["key"])].append(rec)
+    refs = {}
+    for rec in _records(out / "ref"):
+        refs[(rec["scene"], rec["tool"])] = rec
+    return runs, refs
+
+
+def _summary(recs):
+    ok = [r for r in recs if r["ok"]]
+    first = ok[0] if ok else recs[0]
+    row = {"tool": first["tool"], "key": first["key"], "label": first["label"],
+           "steps": first["steps_per_sim_s"], "ok": bool(ok), "runs": len(recs),
+           "load": max(r["load_before"]["load1"] for r in recs),
+           "message": "" if ok else recs[0].get("message", "")}
+    if ok:
+        row["wall"] = statistics.median(r["wall_per_sim_s"] for r in ok)
+        row["walls"] = [r["wall_per_sim_s"] for r in ok]
+        row["process"] = statistics.median(r["process_per_sim_s"] for r in ok)
+        row["error"] = first.get("error_m")
+        row["error_at"] = first.get("error_at_m")
+        row["figures"] = first["figures"]
+    return row
+
+
+def _mm(x, digits=1):
+    return "–" if x is None else f"{1e3 * x:.{digits}f}"
+
+
+def _figure_cells(f, scene):
+    cells = [f"{100 * f['max_edge_stretch']:.2f}", f"{f['min_z']:.4f}", f"{f['min_z_over_time']:.4f}"]
+    if scene.startswith("S2"):
+        cells.append(_mm(f.get("min_dist_to_sphere")))
+    return cells
+
+
+def _row(row, scene, width):
+    if not row["ok"]:
+        cells = [row["tool"], row["label"], f"{row['steps']:g}",
+                 "**failed**: " + row["message"].replace("|", "/")] + ["–"] * (width - 6) \
+            + [f"{row['load']:.2f}", str(row["runs"])]
+        return "| " + " | ".join(cells) + " |"
+    walls = ", ".join(f"{w:.2f}" for w in row["walls"])
+    cells = [row["tool"], row["label"], f"{row['steps']:g}",
+             f"{row['wall']:.2f}" + (f" ({walls})" if len(row["walls"]) > 1 else ""),
+             f"{row['process']:.2f}" if row["tool"] == "distcloth" else "",
+             _mm(row["error"]), " / ".join(_mm(e) for e in row["error_at"]) if row["error_at"] else "–",
+             *_figure_cells(row["figures"], scene), f"{row['load']:.2f}", str(row["runs"])]
+    return "| " + " | ".join(cells) + " |"
+
+
+def _table(scene, rows, ref_rows):
+    s2 = scene.startswith("S2")
+    head = ["tool", "setting", "steps per sim-s", "wall s per sim-s (stepping)",
+            "distcloth process s per sim-s", "error mm (RMS, 0.5-2 s)",
+            "error mm at 0.5 / 1 / 1.5 / 2 s", "max stretch %", "min z at 2 s [m]",
+            "min z over time [m]"] + (["gap to sphere mm"] if s2 else []) + ["load (1 min) before", "runs"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for tool in ("blender", "newton", "distcloth"):
+        for row in (r for r in rows if r["tool"] == tool):
+            lines.append(_row(row, scene, len(head)))
+        for ref in (r for r in ref_rows if r["tool"] == tool and r["ok"]):
+            cells = [ref["tool"], ref["label"] + " (reference)", f"{ref['steps_per_sim_s']:g}",
+                     f"{ref['wall_per_sim_s']:.2f}",
+                     f"{ref['process_per_sim_s']:.2f}" if tool == "distcloth" else "",
+                     "0 (reference)", "", *_figure_cells(ref["figures"], scene),
+                     f"{ref['load_before']['load1']:.2f}", "1"]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _ratios(rows):
+    """For each peer setting: the cheapest distcloth setting at equal or lower
+    error, and how many times faster it is per simulated second."""
+    ours = [r for r in rows if r["tool"] == "distcloth" and r["ok"] and r["error"] is not None]
+    lines = ["| peer setting | peer error mm | peer s per sim-s | distcloth at equal or lower error "
+             "| its error mm | its s per sim-s (stepping / process) | ratio (stepping / process) |",
+             "|---|---|---|---|---|---|---|"]
+    best = None
+    for p in rows:
+        if p["tool"] == "distcloth" or not p["ok"] or p["error"] is None:
+            continue
+        match = [d for d in ours if d["error"] <= p["error"]]
+        if not match:
+            lines.append(f"| {p['tool']} {p['label']} | {_mm(p['error'])} | {p['wall']:.2f} | "
+                         f"no distcloth setting measured reaches this error | | | |")
+            continue
+        d = min(match, key=lambda r: r["wall"])
+        ratio, ratio_p = p["wall"] / d["wall"], p["wall"] / d["process"]
+        lines.append(f"| {p['tool']} {p['label']} | {_mm(p['error'])} | {p['wall']:.2f} | {d['label']} | "
+                     f"{_mm(d['error'])} | {d['wall']:.2f} / {d['process']:.2f} | "
+                     f"{ratio:.2f} / {ratio_p:.2f} |")
+        if best is None or ratio < best[0]:
+            best = (ratio, p, d)
+    return "\n".join(lines), best
+
+
+def _plot(scenes_rows, path: Path, note: str):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = [s for s in scenes_rows if any(r["ok"] and r.get("error") for r in scenes_rows[s])]
+    if not scenes:
+        return False
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 4.4), squeeze=False)
+    style = {"blender": ("tab:orange", "s"), "newton": ("tab:green", "^"),
+             "bdf2": ("tab:blue", "o"), "backward_euler": ("tab:purple", "D")}
+    for ax, scene in zip(axes[0], scenes):
+        series = defaultdict(list)
+        for r in scenes_rows[scene]:
+            if r["ok"] and r.get("error"):
+                name = r["tool"] if r["tool"] != "distcloth" else r["key"].split("_")[0] \
+                    if not r["key"].startswith("backward") else "backward_euler"
+                series[name].append(r)
+        for name, rs in series.items():
+            rs.sort(key=lambda r: r["wall"])
+            color, marker = style[name]
+            label = {"blender": "Blender (quality)", "newton": "Newton VBD (substeps)",
+                     "bdf2": "distcloth BDF-2", "backward_euler": "distcloth backward Euler"}[name]
+            ax.loglog([r["wall"] for r in rs], [1e3 * r["error"] for r in rs], marker=marker,
+                      color=color, label=label)
+            for r in rs:
+                ax.annotate(r["key"].split("_rtol")[0].replace("backward_euler_", "BE ")
+                            .replace("bdf2_", ""), (r["wall"], 1e3 * r["error"]), fontsize=7,
+                            xytext=(3, 3), textcoords="offset points")
+        ax.set_title(SCENE_TITLES[scene])
+        ax.set_xlabel("wall s per simulated s (stepping loop)")
+        ax.set_ylabel("error mm (RMS vs own reference)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(note, fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
+def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
+    runs, refs = _load(out)
+    order = {"blender": 0, "newton": 1, "distcloth": 2}
+    scenes_rows = defaultdict(list)
+    for (scene, tool, key), recs in runs.items():
+        scenes_rows[scene].append(_summary(recs))
+    loads = [r["load_before"]["load1"] for recs in runs.values() for r in recs]
+    text = [INTRO]
+    text.append(f"**Machine**: {machine['cpu']}, {machine['cores']} cores, {machine['memory_gib']} GiB, "
+                f"Debian {machine['debian']} ({machine['system']}). 1-minute load average before "
+                f"the runs: {min(loads, default=0):.2f} to {max(loads, default=0):.2f} "
+                f"({machine['cores']} cores; a load above {0.5 * machine['cores']:g} means others "
+                f"were running and the times are not idle-machine figures).\n")
+    text.append("![error against wall time per simulated second](pictures/peers_pareto.png)\n")
+    for scene in ("S1-41", "S1-101", "S2-81"):
+        rows = sorted(scenes_rows.get(scene, []), key=lambda r: (order[r["tool"]], -r.get("wall", 0)))
+        if not rows:
+            text.append(f"## {SCENE_TITLES[scene]}\n\nNot measured yet: "
+                        f"`.venv/bin/python scripts/bench_peers.py --scenes {scene}`.\n")
+            continue
+        ref_rows = [refs[(scene, t)] for t in ("blender", "newton", "distcloth") if (scene, t) in refs]
+        text.append(f"## {SCENE_TITLES[scene]}\n\n" + _table(scene, rows, ref_rows) + "\n")
+        table, best = _ratios(rows)
+        text.append("Speed at equal error (each peer setting against the cheapest distcloth "
+                    "setting whose error is not larger):\n\n" + table + "\n")
+        if best is not None:
+            ratio, p, d = best
+            text.append(f"Smallest ratio: distcloth {d['label']} is {ratio:.2f}x as fast per simulated "
+                        f"second (stepping loop) as {p['tool']} {p['label']} at equal or lower error.\n")
+        missing = [t for t in ("blender", "newton", "distcloth") if (scene, t) not in refs]
+        if missing:
+            text.append(f"References recorded by an earlier version of the script or not yet run: "
+                        f"{', '.join(missing)} (errors use the cached positions under out/peers/ref/).\n")
+    text.append(COMMANDS)
+    (root / "docs" / "peers.md").write_text("\n".join(text))
+    for part in text[3:-1]:          # the scenes' tables, also on the console
+        print(part)
+    _plot(scenes_rows, root / "docs" / "pictures" / "peers_pareto.png",
+          f"1-minute load before the runs {min(loads, default=0):.1f}-{max(loads, default=0):.1f} "
+          f"on {machine['cores']} cores")
+    print(f"wrote {root / 'docs' / 'peers.md'} and docs/pictures/peers_pareto.png", flush=True)
+
+
+COMMANDS = """\
+## Commands
+
+```
+.venv/bin/python scripts/bench_peers.py --setup-only      # Blender (Debian), Warp + Newton (out/peers/venv)
+.venv/bin/python scripts/bench_peers.py --scenes S1-41 --repeats 1
+.venv/bin/python scripts/bench_peers.py --rerun --repeats 3   # all scenes, idle machine
+.venv/bin/python scripts/bench_peers.py --report-only         # this page from out/peers/
+```
+
+One run of each tool, as the script starts it (logs next to the cached runs, first line the command):
+
+```
+blender -b --factory-startup --python scripts/peers_blender_driver.py -- --peers-dir PEERS \\
+    --save X.npz --times 0.5 1.0 1.5 2.0 -- --scene S1 --n 41 --quality 20
+out/peers/venv/bin/python scripts/peers_newton_driver.py --peers-dir PEERS --save X.npz \\
+    --times 0.5 1.0 1.5 2.0 -- --scene S1 --n 41 --runs 1 --quiet --substeps 10
+scripts/mpiexec.sh 2 .venv/bin/python scripts/peers_distcloth_driver.py --save X.timing.json -- \\
+    configs/bench/s1_41.yaml --set time.integrator=bdf2 --set time.step=0.005 \\
+    --set solver.ksp_rtol=0.001 --output X.h5 --overwrite --quiet
+```
+
+References are run once per scene and tool and cached under `out/peers/ref/` (git-ignored),
+keyed by their settings; delete a file there to recompute it.  Their cost, from the harness's
+results.md (quality 20 and 10 substeps) scaled by the step count: Blender quality 160 about
+2 min on S1-41, ~28 min on S1-101 and ~45 min on S2-81; Newton 20 substeps about 2.6 min,
+~13 min and ~9 min; distcloth BDF-2 at 1 ms a few minutes on S1-41 (measured above).
+"""
