@@ -132,18 +132,32 @@ class Model:
             stencils.append(self.flexion_lines)
         if self.flexion_hinges is not None:
             stencils.append(self.flexion_hinges)
+        # deduplicated stencil by stencil as undirected keys lo * n + hi, so the
+        # peak holds one stencil's pairs (a hinge has 6), not all of them twice
+        keys = [_edge_keys(p[:, 0], p[:, 1], n) for p in pairs]
         for el in stencils:
             nb = el.shape[1]
-            for a in range(nb):
-                for b in range(a + 1, nb):
-                    pairs.append(el[:, [a, b]])
-        allp = np.concatenate(pairs).astype(np.int64)
-        i, j = allp[:, 0], allp[:, 1]
-        rows = np.concatenate([i, j])
-        cols = np.concatenate([j, i])
-        key = np.unique(rows * n + cols)
-        rows, cols = key // n, key % n
+            keys.append(np.unique(np.concatenate(
+                [_edge_keys(el[:, a], el[:, b], n) for a in range(nb) for b in range(a + 1, nb)])))
+        key = np.unique(np.concatenate(keys))
+        del keys
+        lo, hi = np.divmod(key, n)
+        del key
+        # both directions, in row order: rows then columns ascending
+        directed = np.concatenate([lo * n + hi, hi * n + lo])
+        del lo, hi
+        directed.sort()
+        rows, cols = np.divmod(directed, n)
+        del directed
         xadj = np.zeros(n + 1, dtype=np.int64)
         # bincount, not np.add.at: the latter is slow on 400k-vertex meshes
         np.cumsum(np.bincount(rows, minlength=n), out=xadj[1:])
-        return xadj, cols.astype(np.int64)
+        return xadj, cols
+
+
+def _edge_keys(i: np.ndarray, j: np.ndarray, n: int) -> np.ndarray:
+    """Undirected keys min * n + max of the vertex pairs (i, j), self pairs dropped."""
+    i = np.asarray(i, dtype=np.int64)
+    j = np.asarray(j, dtype=np.int64)
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    return (lo * n + hi)[lo != hi]

@@ -508,6 +508,8 @@ class Simulation:
             revision = contact.revise(contacts, result, state.t + h, h, revision)
             if revision is None:
                 break
+            if self.system is not None:      # the re-solve's matrix is nearly the same
+                self.system.keep_preconditioner()
         self.held.hold(result.v, t_end)
         result.contact_report, result.touching, result.limit_report = None, None, None
         if self.limiter is not None:

@@ -74,6 +74,8 @@ class LinearSystem:
         # the iteration count can grow) and saves AMG set-up, the larger cost
         self.pc_rebuild_every = max(1, int(pc_rebuild_every))
         self.solves = 0
+        self._reuse_next = False
+        self._reuses = 0        # solves that kept the last preconditioner (tests read it)
         self.b = A.createVecLeft()
         self.y = A.createVecRight()
         self.r = A.createVecLeft()
@@ -81,11 +83,22 @@ class LinearSystem:
         self.ksp.setOptionsPrefix(PREFIX)
 
     def set_values(self, data: np.ndarray) -> None:
-        self.A.setValuesBlockedCSR(self.indptr, self.gcols,
-                                   np.ascontiguousarray(data.transpose(0, 2, 1)))
+        """Put the owned rows' blocks ``data`` (nnzb, 3, 3) into the matrix;
+        ``data`` is transposed in place for the call and back after, not
+        copied: at 1M vertices a copy is 0.7 GB per rank."""
+        if not data.flags.c_contiguous:
+            data = np.ascontiguousarray(data)
+        _transpose_blocks(data)
+        try:
+            self.A.setValuesBlockedCSR(self.indptr, self.gcols, data)
+        finally:
+            _transpose_blocks(data)
         self.A.assemble()
-        # the same blocks for preconditioners written in Python (sgs32)
-        self.A.setAttr(ATTR, (self.pattern.indptr, self.pattern.block_cols, data, self.n_owned))
+        # the same blocks for preconditioners written in Python (sgs32) only:
+        # held here, they would outlive the step (two filtered copies at peak)
+        if petsc().Options().getString(PREFIX + "pc_type", "") == "python":
+            self.A.setAttr(ATTR, (self.pattern.indptr, self.pattern.block_cols, data,
+                                  self.n_owned))
 
     def configure(self) -> None:
         """Apply the options database to the KSP and set it up (first matrix must be set)."""
@@ -97,6 +110,15 @@ class LinearSystem:
         ksp.setUp()
         if ksp.getPC().getType() == "bjacobi":
             ksp.setUpOnBlocks()
+
+    def keep_preconditioner(self) -> None:
+        """The next solve reuses the last one's multigrid preconditioner: a
+        contact pass's re-solve, whose matrix differs from the last only in
+        the rows of contacts that changed. Still SPD, so CG stays correct
+        (only the iteration count can grow); an AMG set-up costs several
+        solves' worth of iterations at 100k vertices, block Jacobi's almost
+        nothing, so only AMG preconditioners are kept."""
+        self._reuse_next = self.ksp.getPC().getType() in ("gamg", "hypre", "ml")
 
     def block_jacobi_blocks(self) -> int:
         """Local number of block-Jacobi blocks (0 if another preconditioner is in use)."""
@@ -123,7 +145,10 @@ class LinearSystem:
         The initial guess is ``guess`` (n_owned, 3) if given, else with
         ``warm_start`` the previous solution, else zero."""
         self.b.array[:] = rhs.ravel()
-        self.ksp.getPC().setReusePreconditioner(self.solves % self.pc_rebuild_every != 0)
+        reuse = self._reuse_next or self.solves % self.pc_rebuild_every != 0
+        self.ksp.getPC().setReusePreconditioner(reuse)
+        self._reuses += reuse
+        self._reuse_next = False
         self.solves += 1
         if guess is not None:
             with logged("solve:guess"):
@@ -172,6 +197,15 @@ def _norms(*vecs) -> list[float]:
     for v in vecs:
         v.normBegin()
     return [v.normEnd() for v in vecs]
+
+
+def _transpose_blocks(data: np.ndarray) -> None:
+    """Transpose every 3x3 block of ``data`` in place (one off-diagonal pair at
+    a time: temporaries of a ninth of its size)."""
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        upper = data[:, a, b].copy()
+        data[:, a, b] = data[:, b, a]
+        data[:, b, a] = upper
 
 
 def bjacobi_local_blocks(pc) -> int:
