@@ -470,10 +470,15 @@ class Simulation:
             # a linearised step that gained energy: Newton iterated on the same
             # step before any halving (docs/integrators.md, "Large steps")
             self.integrator.newton_override = retry
+            # ... as a one-step scheme: a multistep history from before a
+            # contact's velocity jump carries the energy it removed back in
+            history, self.state.history = self.state.history, None
             try:
                 result, reason, fatal = self._attempt(h, t_end)
             finally:
                 self.integrator.newton_override = None
+                if reason is not None:
+                    self.state.history = history
             if reason is None:
                 self.energy_retries = self._counted(
                     self.energy_retries, f"step {self.state.step}: the linearised step gained "
