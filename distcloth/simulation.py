@@ -550,7 +550,9 @@ class Simulation:
                           f"time.newton_tolerance = {self.cfg.time.newton_tolerance:g})"), False
         saved = state.snapshot()
         pipe.run("update", result)
-        reason, result.energies = self._check_state(h)
+        reason, result.energies = self._check_state()
+        if reason is None and self._gains_in_step(result.energies, h):
+            reason = STEP_GAIN    # only ever retried with Newton, never a rejection
         if reason:
             state.restore(saved)
             return None, reason, False
@@ -599,7 +601,7 @@ class Simulation:
             self.say(message)
         return count + 1
 
-    def _check_state(self, h=None):
+    def _check_state(self):
         """Health check of the tentative state (two reductions): NaN, speed
         limit, strain bound, energy guard.  Returns (reason or None, the
         state's energies or None)."""
@@ -618,8 +620,6 @@ class Simulation:
             return f"strain {strain:.3g} exceeds time.max_strain = {self.cfg.time.max_strain:g}", None
         energies = self.energies()
         reason = self.energy_guard.check(self.state.energy_reference, *energies)
-        if reason is None and h is not None and self._gains_in_step(energies, h):
-            reason = STEP_GAIN    # only ever retried with Newton, never a rejection
         self._energy_excess = None
         if reason is not None and not self.energy_guard.enforce:
             self._energy_excess, reason = reason, None     # accepted: a warning at commit
