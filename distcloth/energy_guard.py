@@ -32,6 +32,7 @@ import numpy as np
 # S is floored so that a cloth at rest without gravity (S = 0) is not stopped
 # by round-off (J; the energies of a 1 g cloth moving at 1 mm/s are 5e-10 J)
 SCALE_FLOOR = 1.0e-12
+ENERGY_GAIN = "energy gain"     # how a rejection by the guard begins
 
 
 def gravity_scale(cfg, model) -> float:
@@ -83,7 +84,7 @@ class EnergyGuard:
         gained = kinetic + gravitational + elastic - e_ref
         excess = gained / scale
         if excess > self.gain:
-            return (f"energy gain: total energy {excess:.3g} S above the passive scene's "
+            return (f"{ENERGY_GAIN}: total energy {excess:.3g} S above the passive scene's "
                     f"{e_ref:.4g} J (S = {scale:.3g} J, limit time.max_energy_gain = "
                     f"{self.gain:g} S): {gained:.4g} J gained")
         return None

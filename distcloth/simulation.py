@@ -18,7 +18,7 @@ import numpy as np
 from .collision.contact import MAX_CONTACT_PASSES, ContactModel
 from .config.load import command_line_key
 from .config.schema import DEFAULT_SOLVER, OPTION_PREFIX, ConfigError
-from .energy_guard import EnergyGuard, drive_end as grip_drive_end, gravity_scale
+from .energy_guard import ENERGY_GAIN, EnergyGuard, drive_end as grip_drive_end, gravity_scale
 from .frame_fields import FrameFields
 from .integrate import make_integrator
 from .kinematics import HeldVertices
@@ -51,6 +51,12 @@ DIAGNOSTICS = ("step_size", "kinetic_energy", "gravitational_energy", "elastic_e
                "tasks_created", "tasks_stolen", "steals_refused", "steal_messages",
                "steal_latency_max", "limited_springs", "limiter_passes", "limited_strain")
 MAX_SPEED = 1.0e3   # m/s: beyond this a cloth simulation has blown up
+STEP_GAIN = "energy gained in one step"
+# a passive step of backward Euler (BDF-2's first) may gain this much of S (round-off,
+# Newton and solver tolerance) before it is solved again with Newton: their
+# converged steps lose energy; a linearised step from rest on the 1000 N/m
+# hanging square gains 0.02 S at 20 ms, 0.8 S at 33 ms (docs/integrators.md)
+STEP_GAIN_TOLERANCE = 1.0e-3
 
 
 def reaction_names(group: int) -> tuple[str, str, str]:
@@ -113,6 +119,8 @@ class Simulation:
                                          np.concatenate([self.pinned_local, self.slide_local]),
                                          self.ghosts, comm)
         self.limiter_unconverged_steps = 0
+        self.energy_retries = 0           # steps solved again with Newton after a gain
+        self._last_energy = None          # total energy of the committed state
         self.pattern = BlockPattern(self.n_owned, self.n_local,
                                     [s for t in self.terms for s in t.stencils()])
         for t in self.terms:
@@ -201,6 +209,7 @@ class Simulation:
         """Collective checks before the first step: solver options, explicit
         stability; the energy guard's reference if the scene starts passive."""
         state = self.state
+        self._last_energy = sum(self.energies())
         if self.energy_guard.wants_reference(state.t, state.energy_reference):
             state.energy_reference = self.energy_guard.reference(*self.energies())
         if self.system is None:
@@ -462,9 +471,29 @@ class Simulation:
     def _advance(self, h, t_end, depth):
         """Attempts from the state's time to ``t_end`` (= t + h up to round-off)."""
         result, reason, fatal = self._attempt(h, t_end)
+        tc = self.cfg.time
+        retry = tc.energy_retry_newton
+        if (reason is not None and reason.startswith((ENERGY_GAIN, STEP_GAIN))
+                and self.integrator.implicit and retry > self.integrator.newton_iterations()):
+            # a linearised step that gained energy: Newton iterated on the same
+            # step before any halving (docs/integrators.md, "Large steps")
+            self.integrator.newton_override = retry
+            # ... as a one-step scheme: a multistep history from before a
+            # contact's velocity jump carries the energy it removed back in
+            history, self.state.history = self.state.history, None
+            try:
+                result, reason, fatal = self._attempt(h, t_end)
+            finally:
+                self.integrator.newton_override = None
+                if reason is not None:
+                    self.state.history = history
+            if reason is None:
+                self.energy_retries = self._counted(
+                    self.energy_retries, f"step {self.state.step}: the linearised step gained "
+                    f"energy; solved again with at most {retry} Newton iterations "
+                    f"(time.energy_retry_newton; later retries are counted)")
         if reason is None:
             return result, h
-        tc = self.cfg.time
         if fatal or not tc.adaptive or depth >= tc.max_halvings:
             if tc.adaptive and not fatal:
                 reason += f" (after {depth} halvings, h = {h:.3g} s)"
@@ -533,6 +562,8 @@ class Simulation:
         pipe.run("update", result)
         with logged("health"):
             reason, result.energies = self._check_state()
+        if reason is None and self._gains_in_step(result.energies, h):
+            reason = STEP_GAIN    # only ever retried with Newton, never a rejection
         if reason:
             state.restore(saved)
             return None, reason, False
@@ -557,6 +588,7 @@ class Simulation:
                 f"newton_unconverged (time.require_newton_convergence rejects)")
         if self.energy_guard.wants_reference(state.t, state.energy_reference):
             state.energy_reference = self.energy_guard.reference(*result.energies)
+        self._last_energy = sum(result.energies)
         if self._energy_excess is not None:
             if self.energy_warnings == 0:
                 message = (f"step {state.step} (t = {state.t:.6g} s): {self._energy_excess}; "
@@ -603,6 +635,18 @@ class Simulation:
         if reason is not None and not self.energy_guard.enforce:
             self._energy_excess, reason = reason, None     # accepted: a warning at commit
         return reason, energies
+
+    def _gains_in_step(self, energies, h) -> bool:
+        """A step of a dissipative scheme (backward Euler, BDF-2's first) on a passive
+        scene that ends with more than STEP_GAIN_TOLERANCE * S above its start:
+        the linearisation, not the scheme, made the energy (retried once with
+        Newton when time.energy_retry_newton allows it)."""
+        ref, last = self.state.energy_reference, self._last_energy
+        if (ref is None or last is None or not self.integrator.monotone_energy(self.state, h)
+                or self.integrator.newton_override is not None
+                or self.cfg.time.energy_retry_newton <= self.integrator.newton_iterations()):
+            return False
+        return sum(energies) - last > STEP_GAIN_TOLERANCE * ref[1]
 
     def destroy(self):
         if self.system is not None:

@@ -256,8 +256,10 @@ def test_command_writes_table_and_csv(tmp_path):
     text = out.read_text()
     assert "| case | backward_euler | rk4 |" in text
     assert re.search(r"\| 20 m/s impact \| survived \| ", text)
-    # one linearised step at 0.1 s overstretches the sheet: the energy guard stops it
-    assert re.search(r"\| large step h = 0\.1 s \| stopped at step \d+: energy gain ", text)
+    # one linearised step at 0.1 s overstretches the sheet: the energy guard
+    # stopped it until the steps that gain energy were solved again with
+    # Newton (time.energy_retry_newton; tests/test_step_health.py)
+    assert re.search(r"\| large step h = 0\.1 s \| survived ", text)
     with open(tmp_path / "stab.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     # case_step: 2 cases x 2 integrators; explicit_stable: rk4 on 2 cases
@@ -267,6 +269,6 @@ def test_command_writes_table_and_csv(tmp_path):
             ("large_step_0.1", "rk4", "case_step")} <= set(status)
     # the CSV agrees with the table above and with the in-process suite
     assert status[("impact", "backward_euler", "case_step")] == SURVIVED
-    assert status[("large_step_0.1", "backward_euler", "case_step")] == STOPPED
+    assert status[("large_step_0.1", "backward_euler", "case_step")] == SURVIVED
     assert status[("large_step_0.1", "rk4", "case_step")] == REFUSED
     assert FAILED not in status.values(), status

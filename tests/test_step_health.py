@@ -60,8 +60,10 @@ def test_fe_strain_bound_now_rejects():
 def _overstretching_scene(**time):
     # 9 x 9 hanging square, one linearised backward-Euler step of 0.1 s: the
     # first step throws the sheet far below its rest length (the stability
-    # suite's large_step_0.1 case, where the energy rose by 0.5 S to 1e4 S)
-    return _pinned(grid_scene(time={"end": 1.0, "step": 0.1, **time}))
+    # suite's large_step_0.1 case, where the energy rose by 0.5 S to 1e4 S);
+    # without the Newton retry of a step that gains energy
+    return _pinned(grid_scene(time={"end": 1.0, "step": 0.1, "energy_retry_newton": 1,
+                                    **time}))
 
 
 def _pinned(raw):
@@ -98,6 +100,19 @@ def test_energy_guard_with_adaptive_steps_keeps_the_bound():
     assert diags[-1]["rejected_steps"] > 0
     assert min(d["step_size"] for d in diags) < 0.1
     # every committed state, halved or not, is inside the guard's bound
+    assert max(d["total_energy"] for d in diags) <= e_ref + 0.1 * scale
+    sim.destroy()
+
+
+def test_the_newton_retry_runs_the_overstretching_scene_to_its_end():
+    # the same steps with the default retry: the steps the guard or the step's
+    # own energy test refuse are solved again with Newton and accepted, no
+    # halving; every committed state within the guard's bound
+    sim = make_sim(_overstretching_scene(energy_retry_newton=10))
+    e_ref, scale = sim.state.energy_reference
+    diags = _run(sim, 10)
+    assert abs(sim.state.t - 1.0) < 1e-12 and diags[-1]["rejected_steps"] == 0
+    assert sim.energy_retries > 0
     assert max(d["total_energy"] for d in diags) <= e_ref + 0.1 * scale
     sim.destroy()
 

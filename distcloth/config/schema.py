@@ -553,7 +553,8 @@ class TimeSpec:
                              "implicit_midpoint, newmark; explicit: symplectic_euler, "
                              "explicit_midpoint, rk4")
     newton_iterations: int | None = setting(None, doc="Newton iterations per step at most; 1 is "
-                                            "Baraff and Witkin's single linearised step; null: "
+                                            "one linear solve, linearised at the scheme's "
+                                            "predictor; null: "
                                             "1, but 30 for implicit_midpoint and newmark with "
                                             "energy_momentum (their energy is conserved by the "
                                             "converged step)", at_least=1,
@@ -587,6 +588,14 @@ class TimeSpec:
                                  "completed_with_warnings")
     max_energy_gain: float = setting(0.1, doc="the guard's margin, a fraction of S = KE + "
                                      "|U_elastic| + M |g| L at the reference", above=0)
+    energy_retry_newton: int = setting(10, doc="a step the energy guard rejects, or a "
+                                       "backward Euler step (BDF-2's first) of a passive scene "
+                                       "that ends above its start's energy, is solved again "
+                                       "with at most this many Newton iterations before it is "
+                                       "halved or the run stops (a linearised large step on a "
+                                       "stiff membrane can gain energy; docs/integrators.md); "
+                                       "1: no retry", at_least=1,
+                                       at_most=MAX_NEWTON_ITERATIONS)
     require_newton_convergence: bool = setting(False, doc="true: a step whose Newton loop ends "
                                                "above newton_tolerance is rejected; false: "
                                                "accepted, counted in newton_unconverged")

@@ -41,6 +41,7 @@ class Integrator:
     implicit = True
     stability_factor = math.inf      # explicit schemes: h < 0.9 * factor / sqrt(lambda_max)
     held_gain = 1.0                  # a held row ends at x0 + h v0 + held_gain * h * z
+    newton_override: int | None = None   # Newton iterations of a retried step (implicit)
 
     def __init__(self, cfg):
         self.cfg = cfg
@@ -51,6 +52,10 @@ class Integrator:
         solves x1 = path(t + h) for z, so a grip is exactly on its path after
         the step (BW98 §5.3's prescribed change, not a correction after it)."""
         return state.x[rows] + h * state.v[rows], self.held_gain * h
+
+    def monotone_energy(self, state, h: float) -> bool:
+        """True if this step, converged, cannot raise a passive scene's energy."""
+        return False
 
     def step(self, ctx, state, h: float, cons, guess=None) -> StepResult:
         """``guess``: a velocity change (owned rows) to start the first solve from,

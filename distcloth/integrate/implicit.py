@@ -9,14 +9,16 @@ family):
     g(dv) = M (dv - d) - s f(x_e, v_e)
     dg/ddv = M - s a_v df/dv - s a_x df/dx       (the assembled system)
 
-The first Newton iteration is linearised at the start state (x0, v0), as
-Baraff and Witkin (1998) do for backward Euler:
+The first Newton iteration starts from dv = 0, the predictor, and is
+linearised there (forces and Jacobians at (x_pred, v0)):
 
-    (M - s a_v D - s a_x K) dv = M d + s (f0 + K (x_pred - x0))
+    (M - s a_v D - s a_x K) dv = M d + s f(x_pred, v0)
 
-so ``time.newton_iterations: 1`` is the classic one-linear-solve step for
-every scheme (the default, except for the energy-momentum midpoint below);
-more iterations continue Newton on g until |S g| <= tol |b0|.
+so ``time.newton_iterations: 1`` is one linear solve per step for every
+scheme (the default, except for the energy-momentum midpoint below); more
+iterations continue Newton on g until |S g| <= tol |b0|.  Baraff and Witkin
+(1998) linearise at the start state instead, b = M d + s (f0 + K (x_pred -
+x0)); Newmark other than 1/4, 1/2 still does (its predictor needs f0).
 
 Energy-momentum midpoint (``time.energy_momentum``, Simo and Tarnow 1992;
 Gonzalez 1996).  The midpoint rule evaluates f at (x0 + x1)/2 and conserves
@@ -71,8 +73,23 @@ class ImplicitScheme(Integrator):
         n = ctx.n_owned
         return aff.x_pred[:n] + aff.a_x * dv[:n], state.v[:n] + dv[:n], aff.a_x
 
+    def linearise_at_predictor(self) -> bool:
+        """True: the first Newton iteration is linearised at the predictor
+        (x_pred, v0), where the residual's dv = 0 evaluates its forces.
+        Baraff and Witkin's linearisation at the start state x0 misses the
+        forces' curvature over |x_pred - x0| = O(h): on a stiff membrane
+        (h omega >> 1) that lags the membrane's turning (centripetal) force
+        by a step and makes every scheme first order (docs/integrators.md,
+        "Stiff membranes").  False where the affine map needs f0 (Newmark)."""
+        return True
+
     def newton_iterations(self) -> int:
         """time.newton_iterations, or this scheme's default when it is null."""
+        if self.newton_override is not None:
+            return max(self.newton_override, self._configured_newton())
+        return self._configured_newton()
+
+    def _configured_newton(self) -> int:
         n = self.cfg.time.newton_iterations
         return n if n is not None else (ENERGY_MOMENTUM_NEWTON_ITERATIONS
                                         if self.energy_momentum() else 1)
@@ -99,13 +116,21 @@ class ImplicitScheme(Integrator):
         n = ctx.n_owned
         x0, v0 = state.x, state.v
         m = ctx.mass[:n, None]
-        f = ctx.forces(x0, v0, want_jac=True)
-        f0 = f
-        aff = self.affine(ctx, state, h, f, cons)
-        kx = ctx.stiffness_product(aff.x_pred - x0)
+        if self.linearise_at_predictor():
+            # Newton's first iterate dv = 0 is the predictor: linearised there,
+            # not at x0 (below), the step misses only O(|x1 - x_pred|^2) = O(h^4)
+            aff = self.affine(ctx, state, h, None, cons)
+            f = ctx.forces(aff.x_pred, v0, want_jac=True)
+            f0 = f
+            b = m * aff.d + aff.s * f[:n]
+        else:
+            f = ctx.forces(x0, v0, want_jac=True)
+            f0 = f
+            aff = self.affine(ctx, state, h, f, cons)
+            kx = ctx.stiffness_product(aff.x_pred - x0)
+            b = m * aff.d + aff.s * (f[:n] + kx[:n])
         alpha, beta = aff.s * aff.a_x, aff.s * aff.a_v
         data = ctx.assemble(alpha=alpha, beta=beta)
-        b = m * aff.d + aff.s * (f[:n] + kx[:n])
         dv_owned, info = ctx.solve(data, b, cons, guess)
         ksp_its, ksp_res = info.iterations, info.residual
         dv = ctx.local_array(dv_owned)
@@ -156,6 +181,10 @@ class ImplicitScheme(Integrator):
 
 class BackwardEuler(ImplicitScheme):
     """x1 = x0 + h v1, M (v1 - v0) = h f(x1, v1): first order, dissipative."""
+
+    def monotone_energy(self, state, h):
+        # dissipative: its converged passive steps lose energy (docs/integrators.md)
+        return True
 
     def affine(self, ctx, state, h, f0, cons):
         return Affine(state.x + h * state.v, h, 1.0, np.zeros((ctx.n_owned, 3)), h)
@@ -209,6 +238,9 @@ class Newmark(ImplicitScheme):
             return ImplicitMidpoint.residual_forces(self, ctx, state, h, aff, dv)
         return super().residual_forces(ctx, state, h, aff, dv)
 
+    def linearise_at_predictor(self):
+        return self.energy_momentum()      # the other predictors need f0 (a0)
+
     def affine(self, ctx, state, h, f0, cons):
         if self.energy_momentum():
             return ImplicitMidpoint.affine(self, ctx, state, h, f0, cons)
@@ -227,6 +259,10 @@ class Newmark(ImplicitScheme):
 class BDF2(ImplicitScheme):
     """x1 = 4/3 x0 - 1/3 x_-1 + 2/3 h v1, v1 = 4/3 v0 - 1/3 v_-1 + 2/3 h M^-1 f(x1, v1):
     second order; the first step, and any step after a change of h, is backward Euler."""
+
+    def monotone_energy(self, state, h):
+        # its own steps are not (BDF-2's energy may oscillate), its backward Euler steps are
+        return state.history is None or state.history.h != h
 
     def affine(self, ctx, state, h, f0, cons):
         hist = state.history
