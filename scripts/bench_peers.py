@@ -56,14 +56,18 @@ TOOLS = ("blender", "newton", "distcloth")
 SWEEP = {
     "blender": [{"quality": q} for q in (10, 20, 40)],
     "newton": [{"substeps": s} for s in (6, 10)],
-    # BDF-2 also at 2.5 ms: the peers' errors at their default settings (30-40 mm on
-    # S1-41) are below what 5 ms reaches
-    "distcloth": [{"integrator": i, "step": h, "ksp_rtol": 1e-3}
-                  for i, steps in (("bdf2", (0.0025, 0.005, 0.01, 0.02)),
-                                   ("backward_euler", (0.005, 0.01, 0.02))) for h in steps],
+    # distcloth with the solver a user gets without a solver: section (CG, warm start,
+    # ksp_rtol 1e-3 without contact, 1e-5 with; docs/benchmarks.md, "Defaults by
+    # problem size"); BDF-2 also at 2.5 ms and with Newton iterated (to a relative
+    # residual of 1e-4), the settings that reach the peers' errors
+    "distcloth": ([{"integrator": i, "step": h, "ksp_rtol": None, "newton": 1}
+                   for i, steps in (("bdf2", (0.0025, 0.005, 0.01, 0.02)),
+                                    ("backward_euler", (0.005, 0.01, 0.02))) for h in steps]
+                  + [{"integrator": "bdf2", "step": h, "ksp_rtol": None, "newton": 4}
+                     for h in (0.005, 0.01, 0.02)]),
 }
 REFERENCE = {"blender": {"quality": 160}, "newton": {"substeps": 20},
-             "distcloth": {"integrator": "bdf2", "step": 0.001, "ksp_rtol": 1e-8}}
+             "distcloth": {"integrator": "bdf2", "step": 0.001, "ksp_rtol": 1e-8, "newton": 1}}
 
 
 def setting_key(tool: str, s: dict) -> str:
@@ -71,7 +75,9 @@ def setting_key(tool: str, s: dict) -> str:
         return f"q{s['quality']}"
     if tool == "newton":
         return f"s{s['substeps']}"
-    return f"{s['integrator']}_{1e3 * s['step']:g}ms_rtol{s['ksp_rtol']:g}"
+    rtol = "default" if s["ksp_rtol"] is None else f"{s['ksp_rtol']:g}"
+    newton = "" if s["newton"] == 1 else f"_newton{s['newton']}"
+    return f"{s['integrator']}_{1e3 * s['step']:g}ms_rtol{rtol}{newton}"
 
 
 def setting_label(tool: str, s: dict) -> str:
@@ -80,7 +86,9 @@ def setting_label(tool: str, s: dict) -> str:
     if tool == "newton":
         return f"VBD {s['substeps']} substeps"
     name = {"bdf2": "BDF-2", "backward_euler": "backward Euler"}[s["integrator"]]
-    return f"{name} {1e3 * s['step']:g} ms, rtol {s['ksp_rtol']:g}"
+    rtol = "default rtol" if s["ksp_rtol"] is None else f"rtol {s['ksp_rtol']:g}"
+    newton = "" if s["newton"] == 1 else f", Newton <= {s['newton']} its"
+    return f"{name} {1e3 * s['step']:g} ms, {rtol}{newton}"
 
 
 def steps_per_sim_s(tool: str, s: dict) -> float:
@@ -216,7 +224,10 @@ def run_distcloth(a, scene: str, s: dict, npz: Path) -> dict:
     cmd = [str(ROOT / "scripts" / "mpiexec.sh"), str(a.ranks), str(ROOT / ".venv" / "bin" / "python"),
            str(ROOT / "scripts" / "peers_distcloth_driver.py"), "--save", str(timing), "--",
            config, "--set", f"time.integrator={s['integrator']}", "--set", f"time.step={s['step']}",
-           "--set", f"solver.ksp_rtol={s['ksp_rtol']}", "--output", str(h5), "--overwrite", "--quiet"]
+           *([] if s["ksp_rtol"] is None else ["--set", f"solver.ksp_rtol={s['ksp_rtol']}"]),
+           *([] if s["newton"] == 1 else ["--set", f"time.newton_iterations={s['newton']}",
+                                          "--set", "time.newton_tolerance=1e-4"]),
+           "--output", str(h5), "--overwrite", "--quiet"]
     code, wall, text = _run(cmd, npz.with_suffix(".log"))
     if not h5.exists() or not timing.exists():
         return {"ok": False, "message": f"exit {code}: " + _last_line(text), "cmd": cmd}

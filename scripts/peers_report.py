@@ -22,7 +22,8 @@ results.md); distcloth runs the same scenes from `configs/bench/`.
 
 **What is compared.**  Each tool runs a few settings (Blender: cloth quality,
 i.e. implicit steps per 1/60 s frame; Newton: VBD substeps per frame, 10
-iterations; distcloth: integrator and step, CG to ksp_rtol 1e-3, 2 MPI ranks).
+iterations; distcloth: integrator, step and Newton iterations, with the solver a
+user gets without a `solver:` section, 2 MPI ranks).
 For each: the wall time of the stepping loop per simulated second, and the
 error, the RMS vertex distance over t = 0.5, 1, 1.5 and 2 s against **the
 tool's own converged reference** (Blender quality 160, Newton 20 substeps,
@@ -182,19 +183,23 @@ def _plot(scenes_rows, path: Path, note: str):
         return False
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 4.4), squeeze=False)
     style = {"blender": ("tab:orange", "s"), "newton": ("tab:green", "^"),
-             "bdf2": ("tab:blue", "o"), "backward_euler": ("tab:purple", "D")}
+             "bdf2": ("tab:blue", "o"), "backward_euler": ("tab:purple", "D"),
+             "bdf2_newton": ("tab:cyan", "v")}
     for ax, scene in zip(axes[0], scenes):
         series = defaultdict(list)
         for r in scenes_rows[scene]:
             if r["ok"] and r.get("error"):
                 name = r["tool"] if r["tool"] != "distcloth" else r["key"].split("_")[0] \
                     if not r["key"].startswith("backward") else "backward_euler"
+                if "_newton" in r["key"]:
+                    name += "_newton"
                 series[name].append(r)
         for name, rs in series.items():
             rs.sort(key=lambda r: r["wall"])
             color, marker = style[name]
             label = {"blender": "Blender (quality)", "newton": "Newton VBD (substeps)",
-                     "bdf2": "distcloth BDF-2", "backward_euler": "distcloth backward Euler"}[name]
+                     "bdf2": "distcloth BDF-2", "backward_euler": "distcloth backward Euler",
+                     "bdf2_newton": "distcloth BDF-2, Newton iterated"}[name]
             ax.loglog([r["wall"] for r in rs], [1e3 * r["error"] for r in rs], marker=marker,
                       color=color, label=label)
             for r in rs:
@@ -276,7 +281,7 @@ out/peers/venv/bin/python scripts/peers_newton_driver.py --peers-dir PEERS --sav
     --times 0.5 1.0 1.5 2.0 -- --scene S1 --n 41 --runs 1 --quiet --substeps 10
 scripts/mpiexec.sh 2 .venv/bin/python scripts/peers_distcloth_driver.py --save X.timing.json -- \\
     configs/bench/s1_41.yaml --set time.integrator=bdf2 --set time.step=0.005 \\
-    --set solver.ksp_rtol=0.001 --output X.h5 --overwrite --quiet
+    --output X.h5 --overwrite --quiet
 ```
 
 References are run once per scene and tool and cached under `out/peers/ref/` (git-ignored),

@@ -158,7 +158,7 @@ THE_EFFECTS = ("one of gravity | membrane | bending | damping | drag | collision
                "strain_limiting | loads")
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
              "newmark_gamma, energy_momentum, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
-             "require_newton_convergence")
+             "energy_retry_newton, require_newton_convergence")
 
 # (key path set on base_scene(), value, the expected line after 'config error: ')
 ERRORS = [
