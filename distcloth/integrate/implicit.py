@@ -164,13 +164,7 @@ class ImplicitScheme(Integrator):
                     converged = True
                     break
                 data = ctx.assemble(alpha=alpha, beta=beta)
-                # from zero: a warm start would begin at the last solve's
-                # velocity change, far larger than this correction (S1-41, BDF-2
-                # 10 ms, 2 iterations: 14 % fewer CG iterations).  Not solved
-                # looser (an inexact-Newton forcing term min(0.1, |g|/|b0|)
-                # halved the iterations but, with a fixed iteration budget, tripled
-                # the error against the reference: docs/benchmarks.md)
-                delta, info = ctx.solve(data, -g, relaxed, np.zeros((n, 3)))
+                delta, info = ctx.solve(data, -g, relaxed)
                 ksp_its += info.iterations
                 ksp_res = max(ksp_res, info.residual)
                 dv[:n] += delta
