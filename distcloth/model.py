@@ -51,6 +51,8 @@ class Model:
     #   mass-spring flexion element (physics/bending.py, FlexionLineTerm)
     flexion_hinges: np.ndarray | None = None      # (nh, 4) hinges of mass-spring mesh files (bending
     #   by dihedral angles there; their flexion springs stay for damping)
+    twist_cells: np.ndarray | None = None         # (nc, 4) grid cells (i,j), (i+1,j), (i,j+1),
+    #   (i+1,j+1): the twist element of the continuum's grid_lines bending
     slide_vertices: np.ndarray | None = None      # (ns,) vertices held only along an axis
     slide_axes: np.ndarray | None = None          # (ns, 3) unit axes
     # garments (distcloth/garment): what a mesh sewn from flat panels needs
@@ -132,6 +134,8 @@ class Model:
             stencils.append(self.flexion_lines)
         if self.flexion_hinges is not None:
             stencils.append(self.flexion_hinges)
+        if self.twist_cells is not None:
+            stencils.append(self.twist_cells)
         # deduplicated stencil by stencil as undirected keys lo * n + hi, so the
         # peak holds one stencil's pairs (a hinge has 6), not all of them twice
         keys = [_edge_keys(p[:, 0], p[:, 1], n) for p in pairs]

@@ -67,7 +67,7 @@ STEP_STAGES: tuple[Stage, ...] = (
           "they join by the seam shrinkage", effect="membrane", build=build_seams),
     Stage("force:bending", "effect bending", "x", "forces, stiffness blocks",
           "mass-spring: flexion line elements (grids), hinges (mesh files), flexion springs "
-          "(garment panels); fem: hinge or shell bending",
+          "(garment panels); fem: line and twist elements (grids), hinge or shell bending",
           effect="bending", build=build_bending),
     Stage("force:sewing", "a garment whose stitches are not yet welded", "x, t",
           "forces, stiffness blocks", "stitch springs whose rest length goes from the start gap "

@@ -145,10 +145,10 @@ def main():
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--warmup", type=int, default=2)
     ap.add_argument("--json", help="also write all results to this JSON file")
-    ap.add_argument("--bending", choices=["dihedral", "isometric", "dihedral_shell", "isometric_shell"],
+    ap.add_argument("--bending", choices=["grid_lines", "dihedral", "isometric", "dihedral_shell", "isometric_shell"],
                     help="worker: FE membrane with this bending model (default: mass-spring)")
     ap.add_argument("--bending-models", nargs="+",
-                    choices=["dihedral", "isometric", "dihedral_shell", "isometric_shell"],
+                    choices=["grid_lines", "dihedral", "isometric", "dihedral_shell", "isometric_shell"],
                     help="compare the FE bending models instead of the solvers: one row per "
                          "model and rank count with the first of --solvers, no warm start")
     args = ap.parse_args()

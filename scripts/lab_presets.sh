@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The fabric lab on every preset, 2 ranks, reports in docs/lab/: each preset
-# as it is (bending_model null: the per-hinge default) on standard specimens,
+# as it is (bending_model null: grid_lines on the grid specimens) on standard specimens,
 # its bending tests again with the shell model, and the drape test on the
 # coarse specimen (the standard one takes 10-15 minutes a fabric).
 set -euo pipefail

@@ -54,6 +54,8 @@ def main():
     for model, bending in models:
         name = "mass-spring + flexion" if model == "mass_spring" else f"FE + {bending}"
         for kind in kinds:
+            if bending == "grid_lines" and kind not in ("regular", "alternating"):
+                continue                           # grids only
             for h in args.spacings:
                 for frac in args.fractions:
                     try:

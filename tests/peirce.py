@@ -38,8 +38,8 @@ WIDTH, RHO, GRAV = 0.025, 0.1, 9.81
 WEIGHT = RHO * GRAV                     # w, N/m^2
 B_STRIP = 1.0e-4                        # N.m: bending length c = (B/w)^(1/3) = 46.7 mm
 ASTM_ANGLE = 41.5                       # degrees
-MODELS = (("fem", "dihedral_shell"), ("fem", "isometric_shell"), ("fem", "dihedral"),
-          ("fem", "isometric"), ("mass_spring", "flexion"))
+MODELS = (("fem", "grid_lines"), ("fem", "dihedral_shell"), ("fem", "isometric_shell"),
+          ("fem", "dihedral"), ("fem", "isometric"), ("mass_spring", "flexion"))
 MESH_KINDS = ("alternating", "regular", "delaunay")
 
 

@@ -179,10 +179,11 @@ def test_mesh_file_scene_runs_on_two_ranks(tmp_path):
     assert np.all(np.isfinite(x)) and x[-1, :, 2].mean() < x[0, :, 2].mean()   # it fell
 
 
-@pytest.mark.parametrize("bending", ["dihedral", "isometric"])
+@pytest.mark.parametrize("bending", ["grid_lines", "dihedral", "isometric"])
 def test_rank_invariance_continuum_membrane(tmp_path, bending):
-    # FE membrane (StVK) with hinge bending: elements crossing ranks are evaluated
-    # on each rank that owns one of their vertices; 1 and 3 ranks must agree
+    # FE membrane (StVK) with grid-line or hinge bending: elements crossing ranks
+    # are evaluated on each rank that owns one of their vertices; 1 and 3 ranks
+    # must agree
     args = ["--set", "time.end=1.0", "--set", "output.every=0.1",
             "--set", "cloth.0.material={model: fem, density: 0.1, E_weft: 10.0, bending: 1.0e-6, "
                      f"bending_model: {bending}}}",

@@ -180,7 +180,7 @@ ERRORS = [
     ("cloth.0.material", {"E_weft": 100}, "cloth.0.material.E_weft: 100 — only with model: fem "
                                           "(mass_spring uses stretch, shear and flexion springs)"),
     ("cloth.0.material", {"model": "fem", "bending_model": "flexion"},
-     "cloth.0.material.bending_model: 'flexion' — dihedral, isometric, dihedral_shell or isometric_shell with model: fem"),
+     "cloth.0.material.bending_model: 'flexion' — grid_lines, dihedral, isometric, dihedral_shell or isometric_shell with model: fem"),
     ("cloth.0.material", {"stretch": True},
      "cloth.0.material.stretch: true — a finite number > 0"),
     ("solver", {"pc_type": "gamg"}, "linear_system.mat_type: 'baij' — aij with solver.pc_type: "

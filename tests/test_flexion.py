@@ -10,9 +10,10 @@ spring it replaces cannot do this (its bending energy is O(kappa^4)).
 import numpy as np
 import pytest
 
-from distcloth.physics.bending import FlexionLineTerm
+from distcloth.physics.bending import FlexionLineTerm, TwistCellTerm
 from distcloth.physics.springs import spring_energy_only
-from distcloth.scene.grid import grid_flexion_lines, grid_vertex_area, grid_vertices
+from distcloth.scene.grid import (grid_flexion_lines, grid_twist_cells, grid_vertex_area,
+                                  grid_vertices)
 from test_bending import assembled, fd_gradient, fd_jacobian, forces, random_rotation, roll
 
 RTOL = 1e-6          # as tests/test_bending.py (central differences, EPS = 1e-6)
@@ -62,10 +63,15 @@ def test_no_energy_for_affine_maps_and_rigid_motions():
         assert np.abs(f).max() <= 1e-12 * scale
 
 
-def test_forces_and_constant_jacobian_against_finite_differences():
+@pytest.mark.parametrize("element", ["line", "twist"])
+def test_forces_and_constant_jacobian_against_finite_differences(element):
+    """The line element, and the twist element of the continuum's grid_lines
+    bending (TwistCellTerm, tests/test_grid_lines.py), which uses the same
+    kernels on the cell's four corners."""
     rng = np.random.default_rng(4)
     x, lines, area = sheet(4, 3)
-    term = term_for(x, lines, area, B=1.5)
+    term = (term_for(x, lines, area, B=1.5) if element == "line"
+            else TwistCellTerm(grid_twist_cells((4, 3)), x, 1.5, 1.0))
     y = x + 0.2 * rng.normal(size=x.shape)
     f, _ = forces(term, y)
     g = fd_gradient(term.energy, y)

@@ -157,7 +157,8 @@ def _material(material: MaterialSpec, section: dict, key: str, ctx: Context) -> 
         return material
     if material.bending_model == "flexion":
         raise ConfigError(join(key, "bending_model"), "flexion",
-                          "dihedral, isometric, dihedral_shell or isometric_shell with model: fem")
+                          "grid_lines, dihedral, isometric, dihedral_shell or isometric_shell "
+                          "with model: fem")
     e_weft, e_warp, nu_weft, nu_warp, _ = material.orthotropic()
     # Eq. 22 of the EG07 tutorial, Part 1 is symmetric only when nu_weft E_warp = nu_warp E_weft
     if abs(nu_weft * e_warp - nu_warp * e_weft) > 1e-9 * max(nu_weft * e_warp, nu_warp * e_weft,
@@ -289,7 +290,28 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
                           "the loads effect needs at least one entry under cloth.<i>.loads")
     _unique_names(config.colliders, "colliders", "collider")
     _garment_pieces(config)
-    return config
+    return _grid_line_bending(config)
+
+
+def _grid_line_bending(config: SceneConfig) -> SceneConfig:
+    """``grid_lines`` only where every piece is a grid (one bending term per
+    scene), and the fem default there: the continuum plate energy on the
+    grid's lines and cells, exact for the Peirce strip on every grid pattern
+    at the cost of the per-hinge sum (docs/fidelity.md)."""
+    grids = all(spec.mesh.grid is not None for spec in config.cloth)
+    for p, spec in enumerate(config.cloth):
+        if spec.material.bending_model == "grid_lines" and not grids:
+            other = next(q for q, s in enumerate(config.cloth) if s.mesh.grid is None)
+            raise ConfigError(f"cloth.{p}.material.bending_model", "grid_lines",
+                              "dihedral, isometric, dihedral_shell or isometric_shell: "
+                              f"grid_lines needs every piece to be a grid (cloth.{other} "
+                              "is not)")
+    if not grids or not config.cloth:
+        return config
+    cloth = tuple(replace(spec, material=replace(spec.material, bending_model="grid_lines"))
+                  if spec.material.model == "fem" and spec.material.bending_model is None
+                  else spec for spec in config.cloth)
+    return replace(config, cloth=cloth)
 
 
 def _unique_names(items: tuple[Any, ...], key: str, noun: str) -> None:

@@ -38,7 +38,8 @@ GRID_CORNERS = ("bottom_left", "bottom_right", "top_left", "top_right")
 MATERIAL_MODELS = ("mass_spring", "fem")
 MASS_LUMPINGS = ("area", "uniform")
 STRAIN_MODELS = ("stvk", "corotated")
-BENDING_MODELS = ("flexion", "dihedral", "isometric", "dihedral_shell", "isometric_shell")
+BENDING_MODELS = ("flexion", "grid_lines", "dihedral", "isometric", "dihedral_shell",
+                  "isometric_shell")
 MAT_TYPES = ("baij", "aij")
 DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
 DRAPE_STOP_ON = ("potential", "kinetic", "both")
@@ -244,8 +245,10 @@ class MaterialSpec:
                          "(projected on each triangle)", nonzero=True)
     bending_model: str | None = choice(None, BENDING_MODELS, doc="null: flexion for mass_spring "
                                        "(its only model: line elements on grids, hinges on mesh "
-                                       "files), dihedral for fem; the models are compared under "
-                                       "Bending models below and in docs/fidelity.md")
+                                       "files); for fem grid_lines when every piece is a grid "
+                                       "(grid_lines: grids only), else dihedral; the models are "
+                                       "compared under Bending models below and in "
+                                       "docs/fidelity.md")
     preset: str | None = choice(None, tuple(FABRICS), doc="a named fabric "
                                 "(distcloth/config/fabrics.py; values illustrative, no "
                                 "measured source): implies model: fem, every key given "
@@ -278,10 +281,12 @@ class MaterialSpec:
     def bending_kind(self) -> str:
         if self.bending_model is not None:
             return self.bending_model
-        # dihedral, not dihedral_shell: the shell model is the accurate one (Peirce
-        # bending length within 2 % on every mesh kind, per-hinge sums 1-6 % short,
-        # docs/fidelity.md) but a step costs 3.2-3.5x at 10k vertices and 4.5-9x at
-        # 100k, nearly all in the solve (docs/benchmarks.md); the user chooses
+        # a fem scene made only of grids gets grid_lines (config/rules.py: the
+        # choice needs every piece); elsewhere dihedral, not dihedral_shell: the
+        # shell model is the accurate one on meshes (Peirce bending length within
+        # 2 % on every mesh kind, per-hinge sums 1-6 % short, docs/fidelity.md)
+        # but a step costs 4.6-8.3x at 10k vertices and 4.5-9x at 100k, nearly
+        # all in the solve (docs/benchmarks.md); the user chooses
         return "flexion" if self.model == "mass_spring" else "dihedral"
 
     @property

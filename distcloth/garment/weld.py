@@ -198,6 +198,7 @@ def weld_model(model: Model, x: np.ndarray, v: np.ndarray, material: SeamMateria
         hinge_scale=hinge_scale if model.hinge_vertices is not None else None,
         shell_stencil=None, shell_present=None, shell_jump_stencil=None,
         flexion_lines=None if model.flexion_lines is None else new_of[model.flexion_lines],
+        twist_cells=None if model.twist_cells is None else new_of[model.twist_cells],
         flexion_hinges=None if model.flexion_hinges is None else new_of[model.flexion_hinges],
         slide_vertices=slide_v, slide_axes=slide_a,
         grips=grips, pin_group=group_of_vertices(grips, first.shape[0]), loads=loads,

@@ -33,8 +33,10 @@ def peirce_section(r) -> str:
         f"| bending stiffness B (µN·m) | {_fmt(1e6 * r.bending_from_elastica, '.3f')} | "
         f"{_fmt(1e6 * r.bending_input, '.3f')} |",
         "",
-        f"B error {_fmt(100 * r.bending_error, '+.2f')} %; mesh spacing "
-        f"{_fmt(1e3 * r.spacing, '.2f')} mm, {r.evaluations} overhangs tried, residual "
+        f"B error {_fmt(100 * r.bending_error, '+.2f')} % (chord {_fmt(r.angle, '.3f')}° at "
+        "that overhang: the search stops within 0.05°, about 0.1 % in B); mesh spacing "
+        f"{_fmt(1e3 * r.spacing, '.2f')} mm, {r.evaluations} "
+        f"overhang{'s' if r.evaluations != 1 else ''} tried, residual "
         f"{_fmt(r.residual, '.1e')} of a vertex weight, {r.wall:.1f} s.", ""])
 
 

@@ -667,6 +667,40 @@ class FlexionLineTerm(IsometricBendingTerm):
         self.slots = None
 
 
+class TwistCellTerm(IsometricBendingTerm):
+    """The twist part of the continuum bending energy on grid cells, with
+    ``FlexionLineTerm`` along the grid lines the ``grid_lines`` bending of
+    a continuum (fem) grid:
+
+        E = 1/2 k |x_00 - x_10 - x_01 + x_11|^2,   k = 2 B / (a b),
+
+    over the corners (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1) of a cell
+    of rest sides a, b.  The mixed difference is a b x_uv + O(h^4), and for
+    a bend of a flat sheet without stretch x_uv = K_uv n, so E = B K_uv^2 a b:
+    with the line elements' B/2 (K_uu^2 + K_vv^2) the sum is the isotropic
+    plate energy B/2 |K|^2 with bending Poisson ratio 0, the energy
+    ``dihedral_shell`` discretises per triangle.  No term couples K_uu to
+    K_vv or K_uv, so a strip bent along a grid line cannot lower its energy
+    by twisting, which is how per-hinge sums on triangles lose 12-17 % of B
+    (docs/mesh_independence.md).  Quadratic, rotation invariant, zero for
+    every affine map of the flat cell, constant exact Jacobian; a curved
+    rest shape is not at rest (``rest_energy``)."""
+
+    def __init__(self, cells, rest, stiffness, weight):
+        cells = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
+        self.hinges = cells
+        ne = cells.shape[0]
+        self.B = _per_hinge(stiffness, ne)
+        self.weight = _per_hinge(weight, ne)
+        x = np.asarray(rest, dtype=np.float64)
+        a = np.linalg.norm(x[cells[:, 1]] - x[cells[:, 0]], axis=1)
+        b = np.linalg.norm(x[cells[:, 2]] - x[cells[:, 0]], axis=1)
+        self.kvec = np.ascontiguousarray(np.tile([1.0, -1.0, -1.0, 1.0], (ne, 1)))
+        self.coef = np.ascontiguousarray(2.0 * self.B / (a * b))
+        self.rest_energy = self.energy(x)
+        self.slots = None
+
+
 class DihedralBendingTerm(_HingeTerm):
     """Dihedral-angle bending (Bridson et al. 2003; EG07 tutorial, Part 1 §4.3, Fig. 11 b).
 

@@ -10,7 +10,7 @@ import numpy as np
 from ..model import FLEXION, SHEAR, STRUCTURAL
 from . import springs as sk
 from .base import ForceTerm, TermSum, local_elements
-from .bending import DihedralBendingTerm, FlexionLineTerm, IsometricBendingTerm
+from .bending import DihedralBendingTerm, FlexionLineTerm, IsometricBendingTerm, TwistCellTerm
 from .bending_shell import JUMP_GAMMA, ShellDihedralBendingTerm, ShellIsometricBendingTerm
 from .membrane_fem import MembraneFEMTerm, orthotropic_plane_stress, with_compression
 
@@ -172,6 +172,8 @@ def build_bending(cfg, model, layout) -> ForceTerm:
     kind = cfg.cloth[0].material.bending_kind
     if kind == "flexion":
         return _flexion_bending(cfg, model, layout)
+    if kind == "grid_lines":
+        return _grid_line_bending(cfg, model, layout)
     return _hinge_bending(cfg, model, layout, kind)
 
 
@@ -222,12 +224,9 @@ def _flexion_bending(cfg, model, layout):
     rest = model.rest_positions[layout.local_input]
     parts, covered = [], []
     if model.flexion_lines is not None:
-        lines = model.flexion_lines
-        local, weight, ids = local_elements(lines[:, [0, 2, 1, 1]], layout)
-        mid = lines[ids, 1]
-        parts.append(FlexionLineTerm(local[:, [0, 2, 1]], rest, piece_B[piece_of_vertex[mid]],
-                                     model.vertex_area[mid], weight))
-        covered.append(lines[:, [0, 2]])        # the grid flexion pairs: damping only
+        parts.append(_line_elements(model, model.flexion_lines, layout, rest,
+                                    piece_B[piece_of_vertex]))
+        covered.append(model.flexion_lines[:, [0, 2]])    # the grid flexion pairs: damping only
     if model.flexion_hinges is not None:
         hg = model.flexion_hinges
         local, weight, ids = local_elements(hg, layout)
@@ -245,6 +244,31 @@ def _flexion_bending(cfg, model, layout):
                                 springs.stiffness[other], springs.weight[other],
                                 np.zeros(int(other.sum()), dtype=bool)))
     return parts[0] if len(parts) == 1 else TermSum("force:bending", parts)
+
+
+def _grid_line_bending(cfg, model, layout):
+    """Continuum bending of grid pieces: line elements along the rows and
+    columns and a twist element per cell (``FlexionLineTerm`` +
+    ``TwistCellTerm``, B/2 |K|^2 with bending Poisson ratio 0)."""
+    piece_B = np.array([spec.material.bending for spec in cfg.cloth])
+    piece_of_vertex = model.per_vertex(np.arange(len(model.pieces)))
+    rest = model.rest_positions[layout.local_input]
+    none = np.zeros((0, 4), dtype=np.int64)
+    lines = none[:, :3] if model.flexion_lines is None else model.flexion_lines
+    cells = none if model.twist_cells is None else model.twist_cells
+    local, weight, ids = local_elements(cells, layout)
+    return TermSum("force:bending", [
+        _line_elements(model, lines, layout, rest, piece_B[piece_of_vertex]),
+        TwistCellTerm(local, rest, piece_B[piece_of_vertex[cells[ids, 0]]], weight)])
+
+
+def _line_elements(model, lines, layout, rest, vertex_B):
+    """``FlexionLineTerm`` on the grid lines (first, middle, last), each with
+    the bending stiffness and lumped area of its middle vertex."""
+    local, weight, ids = local_elements(lines[:, [0, 2, 1, 1]], layout)
+    mid = lines[ids, 1]
+    return FlexionLineTerm(local[:, [0, 2, 1]], rest, vertex_B[mid], model.vertex_area[mid],
+                           weight)
 
 
 def _hinge_bending(cfg, model, layout, kind):

@@ -46,6 +46,7 @@ class _Piece:
     load_sets: list = field(default_factory=list)     # each loads entry's piece-local vertices
     flexion_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=np.int64))
     flexion_hinges: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
+    twist_cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
 
 
 def build_model(cfg: SceneConfig) -> Model:
@@ -75,7 +76,9 @@ def build_model(cfg: SceneConfig) -> Model:
     bodies = (body_meshes(cfg) if garments and (cfg.garment.clearance > 0
                                                 or cfg.garment.start_check) else [])
     pieces = [_build_piece(p, spec, bending_active and spec.material.model == "mass_spring", cfg,
-                           bodies) for p, spec in enumerate(cfg.cloth)]
+                           bodies, grid_lines=bending_active
+                           and spec.material.bending_kind == "grid_lines")
+              for p, spec in enumerate(cfg.cloth)]
 
     infos, vertex_start, triangle_start = [], 0, 0
     for spec, piece in zip(cfg.cloth, pieces):
@@ -94,6 +97,7 @@ def build_model(cfg: SceneConfig) -> Model:
     pinned = np.unique(np.concatenate([piece.pinned + o for piece, o in zip(pieces, offsets)]))
     flexion_lines = np.concatenate([piece.flexion_lines + o for piece, o in zip(pieces, offsets)])
     flexion_hinges = np.concatenate([piece.flexion_hinges + o for piece, o in zip(pieces, offsets)])
+    twist_cells = np.concatenate([piece.twist_cells + o for piece, o in zip(pieces, offsets)])
     slide_index = np.concatenate([piece.slide_index + o for piece, o in zip(pieces, offsets)])
     slide_axis = np.concatenate([piece.slide_axis for piece in pieces])
     # a fully pinned vertex stays fully pinned; a vertex sliding along two axes is pinned
@@ -133,6 +137,7 @@ def build_model(cfg: SceneConfig) -> Model:
                  flexion_lines=flexion_lines.astype(np.int64) if flexion_lines.shape[0] else None,
                  flexion_hinges=(flexion_hinges.astype(np.int64) if flexion_hinges.shape[0]
                                  else None),
+                 twist_cells=twist_cells.astype(np.int64) if twist_cells.shape[0] else None,
                  vertex_mass=vertex_mass, vertex_area=vertex_area,
                  spring_vertices=springs.astype(np.int64), spring_rest_length=rest_length,
                  spring_stiffness=stiffness, spring_damping=damping,
@@ -198,11 +203,16 @@ def _check_one_continuum_material(cfg: SceneConfig) -> None:
 
 
 def _build_piece(p: int, spec: ClothSpec, bending_active: bool, cfg: SceneConfig,
-                 bodies=()) -> _Piece:
+                 bodies=(), grid_lines: bool = False) -> _Piece:
+    """``bending_active``: mass-spring bending (line elements on a grid,
+    hinges on a file); ``grid_lines``: the continuum's line and twist
+    elements on a grid."""
     key = f"cloth.{p}"
     mesh = spec.mesh
     if mesh.grid is not None:
-        piece = _grid_piece(spec, bending_active, key)
+        piece = _grid_piece(spec, bending_active or grid_lines, key)
+        if grid_lines:
+            piece.twist_cells = gridlib.grid_twist_cells(piece.grid_resolution)
     elif mesh.file is not None:
         piece = _file_piece(spec, key)
         if bending_active:

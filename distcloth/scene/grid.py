@@ -104,6 +104,16 @@ def grid_flexion_lines(resolution) -> np.ndarray:
                            lines(index[:-2, :], index[1:-1, :], index[2:, :])])
 
 
+def grid_twist_cells(resolution) -> np.ndarray:
+    """(m, 4) corners (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1) of every
+    cell: the stencil of the mixed second difference x_uv (the twist
+    element of the ``grid_lines`` bending)."""
+    nu, nv = resolution
+    index = np.arange(nu * nv, dtype=np.int64).reshape(nv, nu)
+    return np.stack([index[:-1, :-1].ravel(), index[:-1, 1:].ravel(),
+                     index[1:, :-1].ravel(), index[1:, 1:].ravel()], axis=1)
+
+
 def grid_edge_vertices(resolution, edge: str) -> np.ndarray:
     """Indices of the vertices on one edge of the grid (before rotation)."""
     nu, nv = resolution
