@@ -290,10 +290,10 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
                           "the loads effect needs at least one entry under cloth.<i>.loads")
     _unique_names(config.colliders, "colliders", "collider")
     _garment_pieces(config)
-    return _grid_line_bending(config)
+    return _default_grid_bending(config)
 
 
-def _grid_line_bending(config: SceneConfig) -> SceneConfig:
+def _default_grid_bending(config: SceneConfig) -> SceneConfig:
     """``grid_lines`` only where every piece is a grid (one bending term per
     scene), and the fem default there: the continuum plate energy on the
     grid's lines and cells, exact for the Peirce strip on every grid pattern

@@ -596,7 +596,8 @@ class TimeSpec:
     energy_retry_newton: int = setting(10, doc="a step the energy guard rejects, or a "
                                        "backward Euler step (BDF-2's first) of a passive scene "
                                        "that ends above its start's energy, is solved again "
-                                       "with at most this many Newton iterations before it is "
+                                       "with at most this many Newton iterations, each "
+                                       "backtracking on the residual, before it is "
                                        "halved or the run stops (a linearised large step on a "
                                        "stiff membrane can gain energy; docs/integrators.md); "
                                        "1: no retry", at_least=1,

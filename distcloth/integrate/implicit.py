@@ -51,6 +51,10 @@ from .base import Integrator, StepResult
 # half-step test (measured on the stability suite's hanging sheet: a stalled
 # step oscillates with ratios 0.85-1.1, healthy steps contract by 0.5-0.7)
 DAMPING_TRIGGER = 0.8
+# in the energy retry's Newton, an update that raises the residual's norm is
+# halved until it lowers it, at most down to this fraction (5 halvings); if none
+# does, the fraction that raised it least is kept
+MIN_NEWTON_STEP = 1.0 / 32.0
 
 
 @dataclass
@@ -147,8 +151,12 @@ class ImplicitScheme(Integrator):
                 g = m * (dv[:n] - aff.d) - aff.s * self.residual_forces(ctx, state, h, aff, dv)[:n]
                 return g, ctx.global_norm(ctx.project(relaxed, -g)) / b0
 
+            # the energy retry's Newton (newton_override) searches along its
+            # directions; a scene's own Newton iterations stay plain Newton, which
+            # reaches static equilibria (Peirce, elastica) in fewer iterations
+            search = self.newton_override is not None
+            g, rel = residual(dv)
             while newton_its < max_its:
-                g, rel = residual(dv)
                 if delta is not None and rel > DAMPING_TRIGGER * last and self.damped_newton():
                     # slow progress: Newton's matrix (projected Hessians at the
                     # midpoint) is far from the residual's derivative and the
@@ -163,14 +171,36 @@ class ImplicitScheme(Integrator):
                 if rel <= self.cfg.time.newton_tolerance:
                     converged = True
                     break
-                data = ctx.assemble(alpha=alpha, beta=beta)
+                data = ctx.assemble(alpha=alpha, beta=beta)   # linearised at dv: its last evaluation
                 delta, info = ctx.solve(data, -g, relaxed)
                 ksp_its += info.iterations
                 ksp_res = max(ksp_res, info.residual)
-                dv[:n] += delta
-                ctx.update_ghosts(dv)
                 newton_its += 1
                 reaction = info.reaction
+                trial = dv.copy()
+                trial[:n] += delta
+                ctx.update_ghosts(trial)
+                g_trial, rel_trial = residual(trial)
+                fraction, best = 1.0, (rel_trial, 1.0)
+                while rel_trial >= rel and fraction > MIN_NEWTON_STEP and search:
+                    # Newton overshoots (in contact, or far from the solution):
+                    # backtrack on the residual's norm, which the full step raised
+                    fraction *= 0.5
+                    trial[:n] = dv[:n] + fraction * delta
+                    ctx.update_ghosts(trial)
+                    g_trial, rel_trial = residual(trial)
+                    best = min(best, (rel_trial, fraction))
+                if search and rel_trial >= rel and best[1] != fraction:
+                    # no fraction lowers it: the least raising one (with projected
+                    # Hessians the norm can rise on the way to converging, as on
+                    # the Peirce strip's huge steps), evaluated again last so that
+                    # the next matrix is linearised there
+                    fraction = best[1]
+                    trial[:n] = dv[:n] + fraction * delta
+                    ctx.update_ghosts(trial)
+                    g_trial, rel_trial = residual(trial)
+                delta = fraction * delta
+                dv, g, rel = trial, g_trial, rel_trial
         x1, v1, gain = self.final(ctx, state, h, aff, dv)
         return StepResult(x=x1, v=v1, start_forces=f0, position_gain=gain,
                           history=self.history(state, h), reaction=reaction,
