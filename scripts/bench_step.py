@@ -25,9 +25,11 @@ import sys
 import time
 from pathlib import Path
 
+from distcloth.config.schema import BENDING_MODELS
 from distcloth.linalg.presets import PRECONDITIONERS
 
 ROOT = Path(__file__).resolve().parents[1]
+FE_BENDING_MODELS = [m for m in BENDING_MODELS if m != "flexion"]   # flexion: mass-spring only
 
 def _cg(name, **linear_system):
     """CG with one of distcloth's named preconditioners (distcloth/linalg/presets.py,
@@ -145,10 +147,10 @@ def main():
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--warmup", type=int, default=2)
     ap.add_argument("--json", help="also write all results to this JSON file")
-    ap.add_argument("--bending", choices=["grid_lines", "dihedral", "isometric", "dihedral_shell", "isometric_shell"],
+    ap.add_argument("--bending", choices=FE_BENDING_MODELS,
                     help="worker: FE membrane with this bending model (default: mass-spring)")
     ap.add_argument("--bending-models", nargs="+",
-                    choices=["grid_lines", "dihedral", "isometric", "dihedral_shell", "isometric_shell"],
+                    choices=FE_BENDING_MODELS,
                     help="compare the FE bending models instead of the solvers: one row per "
                          "model and rank count with the first of --solvers, no warm start")
     args = ap.parse_args()

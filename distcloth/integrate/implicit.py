@@ -178,17 +178,20 @@ class ImplicitScheme(Integrator):
                 newton_its += 1
                 reaction = info.reaction
                 trial = dv.copy()
-                trial[:n] += delta
-                ctx.update_ghosts(trial)
-                g_trial, rel_trial = residual(trial)
-                fraction, best = 1.0, (rel_trial, 1.0)
+
+                def residual_at(fraction):       # of dv + fraction * delta, into trial
+                    trial[:n] = dv[:n] + fraction * delta
+                    ctx.update_ghosts(trial)
+                    return residual(trial)
+
+                fraction = 1.0
+                g_trial, rel_trial = residual_at(fraction)
+                best = (rel_trial, fraction)
                 while rel_trial >= rel and fraction > MIN_NEWTON_STEP and search:
                     # Newton overshoots (in contact, or far from the solution):
                     # backtrack on the residual's norm, which the full step raised
                     fraction *= 0.5
-                    trial[:n] = dv[:n] + fraction * delta
-                    ctx.update_ghosts(trial)
-                    g_trial, rel_trial = residual(trial)
+                    g_trial, rel_trial = residual_at(fraction)
                     best = min(best, (rel_trial, fraction))
                 if search and rel_trial >= rel and best[1] != fraction:
                     # no fraction lowers it: the least raising one (with projected
@@ -196,9 +199,7 @@ class ImplicitScheme(Integrator):
                     # the Peirce strip's huge steps), evaluated again last so that
                     # the next matrix is linearised there
                     fraction = best[1]
-                    trial[:n] = dv[:n] + fraction * delta
-                    ctx.update_ghosts(trial)
-                    g_trial, rel_trial = residual(trial)
+                    g_trial, rel_trial = residual_at(fraction)
                 delta = fraction * delta
                 dv, g, rel = trial, g_trial, rel_trial
         x1, v1, gain = self.final(ctx, state, h, aff, dv)
