@@ -314,6 +314,8 @@ def reference(a, scene: str, tool: str) -> Path | None:
 
 def sweep(a, scene: str) -> None:
     refs = {tool: reference(a, scene, tool) for tool in a.tools}
+    if a.references_only:
+        return
     lists = [[(tool, s) for s in SWEEP[tool]] for tool in a.tools]
     for r in range(a.repeats):
         for group in itertools.zip_longest(*lists):      # A, B, C, A, B, C, ...
@@ -361,6 +363,9 @@ def main(argv=None) -> int:
     p.add_argument("--rerun", action="store_true",
                    help="time every setting again (references stay cached)")
     p.add_argument("--no-references", action="store_true", help="never start a reference run")
+    p.add_argument("--references-only", action="store_true",
+                   help="compute the missing references and stop (their timing is not a figure, "
+                        "so they may run while the machine is busy; time the settings later)")
     p.add_argument("--setup-only", action="store_true",
                    help="install Blender and the Warp/Newton venv, then stop")
     p.add_argument("--report-only", action="store_true",

@@ -267,6 +267,7 @@ COMMANDS = """\
 
 ```
 .venv/bin/python scripts/bench_peers.py --setup-only      # Blender (Debian), Warp + Newton (out/peers/venv)
+.venv/bin/python scripts/bench_peers.py --scenes S1-101 --references-only   # the long references, any time
 .venv/bin/python scripts/bench_peers.py --scenes S1-41 --repeats 1
 .venv/bin/python scripts/bench_peers.py --rerun --repeats 3   # all scenes, idle machine
 .venv/bin/python scripts/bench_peers.py --report-only         # this page from out/peers/

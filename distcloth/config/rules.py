@@ -260,6 +260,14 @@ def _time(time: TimeSpec, section: dict, key: str, ctx: Context) -> TimeSpec:
                           f"a whole number of steps of time.step ({time.step:g} s), e.g. "
                           f"{below * time.step:.10g} ({below} steps) or {above * time.step:.10g} "
                           f"({above} steps)")
+    # an energy-momentum step conserves energy only when its Newton loop has
+    # converged: by default such a step is rejected and halved instead of kept
+    iterated = time.newton_iterations is None or time.newton_iterations > 1
+    conserving = time.energy_momentum_scheme and iterated
+    if time.require_newton_convergence is None:
+        time = replace(time, require_newton_convergence=conserving)
+    if time.adaptive is None:
+        time = replace(time, adaptive=conserving)
     return time
 
 

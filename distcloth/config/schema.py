@@ -579,8 +579,12 @@ class TimeSpec:
                                     "trapezoidal average), which gains energy on stiff nonlinear "
                                     "membranes. Needs Newton iterated (newton_iterations null or "
                                     ">= 2; docs/integrators.md)")
-    adaptive: bool = setting(False, doc="retry a rejected step (failed solve, NaN, blow-up, "
-                             "strain bound, energy gain) as two steps of h/2")
+    adaptive: bool | None = setting(None, doc="retry a rejected step (failed solve, NaN, "
+                                    "blow-up, strain bound, energy gain, unconverged Newton "
+                                    "where convergence is required) as two steps of h/2; null: "
+                                    "true for the energy-momentum schemes (their energy is "
+                                    "only conserved by a converged step, and Newton converges "
+                                    "on shorter steps), false otherwise")
     max_halvings: int = setting(6, doc="how many times adaptive may halve a step", at_least=1,
                                 at_most=30)
     max_strain: float | None = setting(None, doc="reject a step whose largest membrane strain "
@@ -602,9 +606,20 @@ class TimeSpec:
                                        "stiff membrane can gain energy; docs/integrators.md); "
                                        "1: no retry", at_least=1,
                                        at_most=MAX_NEWTON_ITERATIONS)
-    require_newton_convergence: bool = setting(False, doc="true: a step whose Newton loop ends "
-                                               "above newton_tolerance is rejected; false: "
-                                               "accepted, counted in newton_unconverged")
+    require_newton_convergence: bool | None = setting(None, doc="true: a step whose Newton "
+                                                      "loop ends above newton_tolerance is "
+                                                      "rejected; false: accepted, counted in "
+                                                      "newton_unconverged; null: true for the "
+                                                      "energy-momentum schemes, false otherwise")
+
+    @property
+    def energy_momentum_scheme(self) -> bool:
+        """implicit_midpoint, or newmark with beta 1/4 and gamma 1/2, with
+        energy_momentum: the schemes whose converged step conserves energy."""
+        if not self.energy_momentum:
+            return False
+        return self.integrator == "implicit_midpoint" or (
+            self.integrator == "newmark" and self.newmark_beta == 0.25 and self.newmark_gamma == 0.5)
 
 
 @dataclass(frozen=True)

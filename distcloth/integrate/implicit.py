@@ -55,6 +55,12 @@ DAMPING_TRIGGER = 0.8
 # halved until it lowers it, at most down to this fraction (5 halvings); if none
 # does, the fraction that raised it least is kept
 MIN_NEWTON_STEP = 1.0 / 32.0
+# where an unconverged step is rejected anyway (time.require_newton_convergence),
+# Newton gives up once the contraction of its last NEWTON_RATE_WINDOW iterations,
+# continued, would not reach the tolerance within the iterations left: the
+# energy-momentum Newton converges linearly, and a step that cannot converge
+# used to spend all its iterations before being halved
+NEWTON_RATE_WINDOW = 3
 
 
 @dataclass
@@ -155,7 +161,9 @@ class ImplicitScheme(Integrator):
             # directions; a scene's own Newton iterations stay plain Newton, which
             # reaches static equilibria (Peirce, elastica) in fewer iterations
             search = self.newton_override is not None
+            give_up = self.cfg.time.require_newton_convergence
             g, rel = residual(dv)
+            rels = [rel]
             while newton_its < max_its:
                 if delta is not None and rel > DAMPING_TRIGGER * last and self.damped_newton():
                     # slow progress: Newton's matrix (projected Hessians at the
@@ -167,9 +175,13 @@ class ImplicitScheme(Integrator):
                     g_half, rel_half = residual(half)
                     if rel_half < rel:
                         dv, g, rel = half, g_half, rel_half
+                        rels[-1] = rel
                 last = rel
                 if rel <= self.cfg.time.newton_tolerance:
                     converged = True
+                    break
+                if give_up and not _reachable(rels, self.cfg.time.newton_tolerance,
+                                              max_its - newton_its):
                     break
                 data = ctx.assemble(alpha=alpha, beta=beta)   # linearised at dv: its last evaluation
                 delta, info = ctx.solve(data, -g, relaxed)
@@ -202,12 +214,24 @@ class ImplicitScheme(Integrator):
                     g_trial, rel_trial = residual_at(fraction)
                 delta = fraction * delta
                 dv, g, rel = trial, g_trial, rel_trial
+                rels.append(rel)
         x1, v1, gain = self.final(ctx, state, h, aff, dv)
         return StepResult(x=x1, v=v1, start_forces=f0, position_gain=gain,
                           history=self.history(state, h), reaction=reaction,
                           newton_iterations=newton_its,
                           ksp_iterations=ksp_its, ksp_residual=ksp_res, newton_residual=rel,
                           newton_converged=converged)
+
+
+def _reachable(rels, tolerance, left) -> bool:
+    """Whether Newton, contracting as over its last NEWTON_RATE_WINDOW
+    iterations, reaches ``tolerance`` from ``rels[-1]`` within ``left`` more."""
+    if len(rels) <= NEWTON_RATE_WINDOW:
+        return True
+    rate = (rels[-1] / rels[-1 - NEWTON_RATE_WINDOW]) ** (1.0 / NEWTON_RATE_WINDOW)
+    if rate >= 1.0:
+        return False
+    return rels[-1] * rate ** left <= tolerance
 
 
 class BackwardEuler(ImplicitScheme):
@@ -235,7 +259,7 @@ class ImplicitMidpoint(ImplicitScheme):
         return state.x[:n] + 0.5 * h * (state.v[:n] + v1), v1, 0.5 * h
 
     def energy_momentum(self):
-        return self.cfg.time.energy_momentum
+        return self.cfg.time.energy_momentum_scheme
 
     def residual_forces(self, ctx, state, h, aff, dv):
         if not self.energy_momentum():
@@ -256,8 +280,7 @@ class Newmark(ImplicitScheme):
     midpoint (ImplicitMidpoint's); other beta, gamma are not conserving."""
 
     def energy_momentum(self):
-        t = self.cfg.time
-        return t.energy_momentum and t.newmark_beta == 0.25 and t.newmark_gamma == 0.5
+        return self.cfg.time.energy_momentum_scheme
 
     def final(self, ctx, state, h, aff, dv):
         if self.energy_momentum():
