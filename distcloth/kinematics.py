@@ -19,6 +19,7 @@ class HeldVertices:
         inputs = layout.local_input[self.rows]
         self.group = (model.pin_group[inputs] if model.pin_group is not None
                       else np.full(self.rows.size, -1, dtype=np.int64))
+        self.inputs = inputs
         self.X = model.start_positions()[inputs]
         self.mass = mass[self.rows]
         # per grip, then per row (index -1, a row of no grip, takes the last entry: False)
@@ -35,9 +36,10 @@ class HeldVertices:
         out = np.zeros((int(self.moving.sum()), 3))
         group = self.group[self.moving]
         X = self.X[self.moving]
+        inputs = self.inputs[self.moving]
         for g in np.unique(group):
             sel = group == g
-            out[sel] = getattr(self.grips[g].path, what)(X[sel], t)
+            out[sel] = getattr(self.grips[g].path, what)(X[sel], t, inputs[sel])
         return out
 
     def targets(self, state, h: float, t_end: float, integrator) -> np.ndarray:

@@ -78,6 +78,9 @@ class Model:
     grips: list = field(default_factory=list)
     pin_group: np.ndarray | None = None           # (n,) index into grips, -1: not held
     loads: Any = None                             # scene.grips.Loads, None: none
+    # skin-following regions (scene/skin_follow.py): per piece, its region's vertices in
+    # pattern numbering (None: the piece has none); None: no piece has one
+    follow_regions: list | None = None
 
     @property
     def moving_grips(self) -> bool:

@@ -60,7 +60,8 @@ def setup(cfg, comm, *, force=False, cmdline_options=None, quiet=False, resume=N
         model = build_model(cfg)
         if resume is not None and "weld_rows" in resume.arrays:
             # a sewn garment: the same welded mesh from the same weld input
-            model = welded_model(cfg, model, resume.arrays["weld_rows"])
+            model = welded_model(cfg, model, resume.arrays["weld_rows"],
+                                 float(resume.scalars["weld_time"]))
     except ConfigError as exc:
         err = exc
     except MemoryError:      # past the up-front estimate (scene/build.py): still one line
@@ -130,6 +131,9 @@ def refuse_moving_grips(cfg) -> ConfigError | None:
                 return ConfigError(f"cloth.{p}.pins.{k}.motion", "a motion",
                                    "null for distcloth drape (a grip that moves has no rest "
                                    "state to relax to; use distcloth run)")
+        if spec.follow_skin is not None:
+            return ConfigError(f"cloth.{p}.follow_skin", "a region", "null for distcloth drape "
+                               "(a region that follows a body moves with it; use distcloth run)")
     return None
 
 

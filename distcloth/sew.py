@@ -19,6 +19,7 @@ import numpy as np
 from .config.schema import ConfigError
 from .garment.weld import SeamMaterial, weld_model
 from .io.console import Progress, log
+from .scene.skin_follow import add_skin_grips
 from .simulation import Simulation, SimulationError
 
 
@@ -101,16 +102,21 @@ def weld_rows(sim: Simulation, comm) -> np.ndarray:
                                sim.model.num_vertices)
 
 
-def welded_model(cfg, model, rows: np.ndarray):
-    """The welded model of the pattern ``model`` sewn to ``rows`` (weld_rows);
-    ValueError if the weld fails (the same on every rank)."""
+def welded_model(cfg, model, rows: np.ndarray, t: float):
+    """The welded model of the pattern ``model`` sewn to ``rows`` (weld_rows)
+    at time t, its skin-following regions attached then; ValueError if the
+    weld fails, ConfigError if a region does not reach its body (the same on
+    every rank)."""
     seams = cfg.garment.seams
     material = SeamMaterial(seams.stretch, seams.width, seams.bending, seams.shrinkage)
-    return weld_model(model, rows[:, :3], rows[:, 3:], material,
-                      _per_vertex(cfg, model, lambda m: m.orthotropic()[0]
-                                  if m.model == "fem" else m.stretch),
-                      _per_vertex(cfg, model, lambda m: m.bending),
-                      _per_vertex(cfg, model, lambda m: m.damping))
+    welded = weld_model(model, rows[:, :3], rows[:, 3:], material,
+                        _per_vertex(cfg, model, lambda m: m.orthotropic()[0]
+                                    if m.model == "fem" else m.stretch),
+                        _per_vertex(cfg, model, lambda m: m.bending),
+                        _per_vertex(cfg, model, lambda m: m.damping))
+    welded.follow_regions = model.follow_regions
+    add_skin_grips(cfg, welded, t)
+    return welded
 
 
 def weld(sim: Simulation, cfg, comm, *, quiet=False, force=False,
@@ -124,9 +130,11 @@ def weld(sim: Simulation, cfg, comm, *, quiet=False, force=False,
     t, step = sim.state.t, sim.state.step
     error, new_model = None, None
     try:
-        new_model = welded_model(cfg, model, rows)
+        new_model = welded_model(cfg, model, rows, t)
     except ValueError as exc:       # the same on every rank: the model is replicated
         error = f"welding the sewn garment failed: {exc}"
+    except ConfigError as exc:      # a skin-following region out of reach: the same everywhere
+        error = f"the welded garment cannot be simulated: {exc}"
     sim.destroy()
     if error is not None:
         raise SimulationError(step, error)

@@ -34,6 +34,19 @@ class StepContext:
             self.pipeline.run(name, x, v, f, want_jac, start)
         return f
 
+    def begin_step(self, x0) -> None:
+        """Tell the terms that keep something of a step's start state (the
+        dihedral angles' branch) where the step starts (local rows)."""
+        for t in self.terms:
+            if hasattr(t, "at_step_start"):
+                t.at_step_start(x0)
+
+    def end_step(self) -> None:
+        """The step is over: the terms forget its start state."""
+        for t in self.terms:
+            if hasattr(t, "at_step_end"):
+                t.at_step_end()
+
     def stiffness_product(self, w) -> np.ndarray:
         """(df/dx) w at the last evaluation, on every local row."""
         out = np.zeros((self.n_local, 3))

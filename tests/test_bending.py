@@ -366,3 +366,43 @@ def test_energy_weight_scales_energy_not_forces():
         assert np.array_equal(fa, fb)
         assert np.isclose(ib["elastic_energy"], 0.25 * ia["elastic_energy"], rtol=1e-13)
 
+
+
+def test_a_fold_pressed_flat_keeps_its_force_across_pi():
+    # two triangles folded on each other (dihedral angle pi - 0.05 from a flat
+    # rest): a trial state of the step (the predictor, a Newton iterate) that
+    # folds them 0.1 rad further crosses +-pi.  On the branch of the step's
+    # start its angle is pi + 0.05 and the force keeps opening the fold, as
+    # just before the crossing (same direction, a little larger); without the
+    # branch the raw angle -pi + 0.05 reverses the force, which pushed folds
+    # further through and kept a sewn skirt jittering
+    hinge = np.array([[0, 1, 2, 3]])
+    rest = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]])
+
+    def folded(angle):     # triangle (0, 1, 3) turned about the hinge's edge
+        x = rest.copy()
+        c, s = np.cos(angle), np.sin(angle)
+        x[3] = [0.5, -c, -s]
+        return x
+
+    term = DihedralBendingTerm(hinge, rest, 1.0, 1.0)
+    start, crossed = folded(np.pi - 0.05), folded(np.pi + 0.05)
+    assert hinge_angles(crossed, hinge)[0] * hinge_angles(start, hinge)[0] < 0
+
+    def force(x):
+        f = np.zeros((4, 3))
+        term.evaluate(x, None, f, False)
+        return f
+
+    before = force(start)
+    raw = force(crossed)
+    term.at_step_start(start)
+    on_branch = force(crossed)
+    term.at_step_end()
+    assert np.allclose(force(crossed), raw)       # outside a step: the raw angle
+    cos_raw = np.sum(raw * before) / np.linalg.norm(raw) / np.linalg.norm(before)
+    cos_branch = np.sum(on_branch * before) / np.linalg.norm(on_branch) / np.linalg.norm(before)
+    assert cos_raw < -0.99 and cos_branch > 0.99
+    # |theta - theta0| is pi + 0.05 against pi - 0.05: the force grows by that ratio
+    ratio = np.linalg.norm(on_branch) / np.linalg.norm(before)
+    assert abs(ratio - (np.pi + 0.05) / (np.pi - 0.05)) < 1e-9

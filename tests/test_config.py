@@ -97,8 +97,9 @@ def test_full_scene_gives_the_written_values(scene_dir):
         effects=("gravity", "membrane", "drag"),
         gravity=(0.0, 0.0, -9.8),
         drag=0.5,
+        # resolved: not an energy-momentum scheme; no contact effect, so the predictor
         time=TimeSpec(2.0, 0.01, "symplectic_euler", 3, 1.0e-6, adaptive=False,
-                      require_newton_convergence=False),   # resolved: not an energy-momentum scheme
+                      require_newton_convergence=False, linearise_at="predictor"),
         solver=(("ksp_type", "gmres"), ("pc_type", "bjacobi"), ("sub_pc_type", "sor"),
                 ("ksp_rtol", 1e-8), ("ksp_max_it", 50), ("ksp_monitor", True)),
         linear_system=LinearSystemSpec(mat_type="aij"),
@@ -114,7 +115,8 @@ def test_defaults_fill_everything_not_given(tmp_path):
                               str(tmp_path), "some/dir/drape.yaml")
     assert dataclasses.replace(config, source_text="") == SceneConfig(
         scene="drape",
-        cloth=(ClothSpec(name="piece0", mesh=MeshSpec(grid=GridSpec((1.0, 2.0), (3, 4)))),))
+        cloth=(ClothSpec(name="piece0", mesh=MeshSpec(grid=GridSpec((1.0, 2.0), (3, 4)))),),
+        time=TimeSpec(linearise_at="predictor"))    # resolved: no contact effect
     assert config.cloth[0].mesh.grid.pattern == "alternating"
     assert config.cloth[0].material.shear_stiffness == 1.0
     # no solver: section: the preset by problem size (linalg/presets.py) decides
@@ -126,7 +128,7 @@ def test_null_sections_mean_defaults(tmp_path):
     raw = {"cloth": [grid_piece(material=None, pins=None)],
            "time": None, "solver": None, "output": None, "effects": None}
     config = config_from_dict(raw, str(tmp_path), "x.yaml")
-    assert config.time == TimeSpec() and config.output == OutputSpec()
+    assert config.time == TimeSpec(linearise_at="predictor") and config.output == OutputSpec()
     assert config.cloth[0].material == MaterialSpec() and config.cloth[0].pins == ()
 
 
@@ -159,7 +161,7 @@ THE_EFFECTS = ("one of gravity | membrane | bending | damping | drag | collision
                "strain_limiting | loads")
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
              "newmark_gamma, energy_momentum, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
-             "energy_retry_newton, require_newton_convergence")
+             "energy_retry_newton, require_newton_convergence, linearise_at")
 
 # (key path set on base_scene(), value, the expected line after 'config error: ')
 ERRORS = [

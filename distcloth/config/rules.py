@@ -298,7 +298,45 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
                           "the loads effect needs at least one entry under cloth.<i>.loads")
     _unique_names(config.colliders, "colliders", "collider")
     _garment_pieces(config)
+    config = _follow_skin(config)
+    if config.time.linearise_at is None:
+        # where contacts stop the cloth its predictor x0 + h v0 lies inside the
+        # body and through its own folds: a sewn skirt linearised there never
+        # settled on the hips (docs/integrators.md)
+        contact = "collisions" in config.effects or "self_collision" in config.effects
+        config = replace(config, time=replace(config.time,
+                                              linearise_at="start" if contact else "predictor"))
     return _default_grid_bending(config)
+
+
+def _follow_skin(config: SceneConfig) -> SceneConfig:
+    """A skin-following region names a mesh collider (the only one, if it
+    does not say); edge labels exist only on pattern pieces.  The collider's
+    name is filled in, so the model builder has it."""
+    meshes = [c.name for c in config.colliders if c.shape == "mesh"]
+    cloth = list(config.cloth)
+    for p, spec in enumerate(config.cloth):
+        follow = spec.follow_skin
+        if follow is None:
+            continue
+        key = f"cloth.{p}.follow_skin"
+        if follow.edges and spec.mesh.pattern is None:
+            raise ConfigError(f"{key}.edges", list(follow.edges),
+                              "[] for a piece that is not a pattern (edge labels are the "
+                              "pattern's)")
+        name = follow.collider
+        if name is None:
+            if len(meshes) != 1:
+                raise ConfigError(f"{key}.collider", None,
+                                  "the name of the mesh collider to follow (the scene has "
+                                  f"{len(meshes)} mesh colliders: " + (", ".join(meshes) or "none")
+                                  + ")")
+            name = meshes[0]
+        elif name not in meshes:
+            raise ConfigError(f"{key}.collider", name, "the name of a mesh collider ("
+                              + (", ".join(meshes) or "none") + ")")
+        cloth[p] = replace(spec, follow_skin=replace(follow, collider=name))
+    return replace(config, cloth=tuple(cloth))
 
 
 def _default_grid_bending(config: SceneConfig) -> SceneConfig:

@@ -41,6 +41,7 @@ STRAIN_MODELS = ("stvk", "corotated")
 BENDING_MODELS = ("flexion", "grid_lines", "dihedral", "isometric", "dihedral_shell",
                   "isometric_shell")
 MAT_TYPES = ("baij", "aij")
+LINEARISATION_POINTS = ("predictor", "start")
 DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
 DRAPE_STOP_ON = ("potential", "kinetic", "both")
 DRAPE_CRITERIA = ("force", "motion")
@@ -306,6 +307,26 @@ class StartNoiseSpec:
 
 
 @dataclass(frozen=True)
+class FollowSkinSpec:
+    """A skin-following region (EG07 tutorial, Part 2 §2.3): a tight part of
+    the garment (a waistband, a cuff) moves with the body's surface at the
+    offset it had when it was attached instead of being simulated.  Attached
+    where the run starts (a sewn garment: at the weld); each vertex keeps its
+    position in the frame of the body triangle closest to it then."""
+    collider: str | None = setting(None, doc="the mesh collider it follows, by name; null: "
+                                   "the scene's only mesh collider")
+    edges: tuple[str, ...] = setting((), doc="pattern pieces: labels of the pattern's edges "
+                                     "whose band follows (the vertices within band of them in "
+                                     "the flat panel); empty: the whole piece (then "
+                                     "within alone chooses)",
+                                     what="edge labels of the pattern")
+    band: float = setting(0.03, doc="width of the band along those edges, in the flat panel",
+                          unit="m", above=0)
+    within: float = setting(0.01, doc="only the vertices this close to the body's surface "
+                            "when attached follow it", unit="m", above=0)
+
+
+@dataclass(frozen=True)
 class ClothSpec:
     """One piece of cloth."""
     name: str = setting(doc="unique among the pieces", auto="piece{index}")
@@ -329,6 +350,9 @@ class ClothSpec:
                                "for comparisons with them)")
     start_noise: StartNoiseSpec = section(StartNoiseSpec, doc="out-of-plane noise of the start "
                                           "positions")
+    follow_skin: FollowSkinSpec | None = setting(None, doc="a region that moves with the body's "
+                                                  "surface instead of being simulated; null: "
+                                                  "none")
     layer: int = setting(0, doc="pattern pieces worn together: 0 innermost; a piece of layer k "
                          "starts k * garment.layer_gap further out and is sewn after the layers "
                          "under it (from k * garment.sewing.duration on)", at_least=0)
@@ -611,6 +635,15 @@ class TimeSpec:
                                                       "rejected; false: accepted, counted in "
                                                       "newton_unconverged; null: true for the "
                                                       "energy-momentum schemes, false otherwise")
+    linearise_at: str | None = choice(None, LINEARISATION_POINTS, doc="where a step's first "
+                                      "Newton iteration is linearised: predictor (x0 + h v0 "
+                                      "for backward Euler; keeps BDF-2 second order on a stiff "
+                                      "membrane) or start (x0, Baraff and Witkin 1998: robust "
+                                      "where contacts stop the cloth, whose predictor lies "
+                                      "inside the body and its folds); null: start with the "
+                                      "collisions or self_collision effect, else predictor "
+                                      "(docs/integrators.md). Newmark other than the "
+                                      "energy-momentum one always starts at x0")
 
     @property
     def energy_momentum_scheme(self) -> bool:

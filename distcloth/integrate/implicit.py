@@ -90,8 +90,9 @@ class ImplicitScheme(Integrator):
         forces' curvature over |x_pred - x0| = O(h): on a stiff membrane
         (h omega >> 1) that lags the membrane's turning (centripetal) force
         by a step and makes every scheme first order (docs/integrators.md,
-        "Stiff membranes").  False where the affine map needs f0 (Newmark)."""
-        return True
+        "Stiff membranes").  False where the affine map needs f0 (Newmark), and
+        where the scene asks for the start state (time.linearise_at)."""
+        return self.cfg.time.linearise_at != "start"
 
     def newton_iterations(self) -> int:
         """time.newton_iterations, or this scheme's default when it is null."""
@@ -293,7 +294,8 @@ class Newmark(ImplicitScheme):
         return super().residual_forces(ctx, state, h, aff, dv)
 
     def linearise_at_predictor(self):
-        return self.energy_momentum()      # the other predictors need f0 (a0)
+        # the other predictors need f0 (a0)
+        return self.energy_momentum() and self.cfg.time.linearise_at != "start"
 
     def affine(self, ctx, state, h, f0, cons):
         if self.energy_momentum():

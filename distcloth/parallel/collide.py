@@ -230,6 +230,9 @@ def build_collisions(comm, model, layout, mesh_colliders=(), self_collision: boo
     geometry = CollisionGeometry(tri, model.num_vertices, owner, comm.size,
                                  [(c.n_vertices, c.triangles) for c in mesh_colliders],
                                  rest=np.concatenate(rest))
+    # pinned cloth vertices (pins, grips, skin-following regions) move as prescribed: a
+    # pair of them and collider primitives has no free vertex, and no impulse can act on it
+    geometry.kinematic[model.pinned] = True
     detector = DistributedCollisions(comm, layout, geometry, self_collision, **detector_options)
     if model.same_vertex is not None:
         detector.same = np.concatenate([model.same_vertex,

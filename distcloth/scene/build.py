@@ -19,6 +19,7 @@ from .placement import place
 from .weld_vertices import count_parts, weld_coincident
 from .garment import (Garment, body_meshes, check_garment_start, garment_arrays,
                       pattern_piece_of)
+from .skin_follow import add_skin_grips, region_candidates
 from .uvs import scene_uvs
 from .springs import (check_triangle_mesh, flexion_stiffness, grid_spring_constants,
                       mesh_springs, mesh_structural_stiffness, triangle_areas)
@@ -161,6 +162,10 @@ def build_model(cfg: SceneConfig) -> Model:
         garment_arrays(model, cfg, [piece.garment for piece in pieces], offsets)
         if cfg.garment.start_check:
             check_garment_start(cfg, model, bodies)
+    if any(spec.follow_skin is not None for spec in cfg.cloth):
+        model.follow_regions = region_candidates(cfg, model, [piece.garment for piece in pieces])
+        if model.stitch_pairs is None:      # a sewn garment is attached at its weld (sew.py)
+            add_skin_grips(cfg, model, 0.0)
     return model
 
 

@@ -34,7 +34,9 @@ class PinPath:
             return math.inf if s.stop is None else float(s.stop)
         return float(s.times[-1])
 
-    def positions(self, X: np.ndarray, t: float) -> np.ndarray:
+    def positions(self, X: np.ndarray, t: float, vertices=None) -> np.ndarray:
+        """(k, 3) where the vertices starting at X are at t (``vertices``, their
+        global indices, matter only to paths that are not rigid: skin_follow.py)."""
         s = self.spec
         if self.keys is None:
             stop = math.inf if s.stop is None else s.stop
@@ -43,7 +45,7 @@ class PinPath:
         R, p = self.keys.transform(t)
         return self.center + (X - self.center) @ R.T + p
 
-    def velocities(self, X: np.ndarray, t: float) -> np.ndarray:
+    def velocities(self, X: np.ndarray, t: float, vertices=None) -> np.ndarray:
         """The velocity at t of the interval that starts at t (a key or the
         start/stop time belongs to the motion that follows it)."""
         s = self.spec
@@ -182,7 +184,7 @@ def start_velocities(cfg, model) -> np.ndarray | None:
         if grip.path is None:
             continue
         rows = grip.vertices[model.pin_group[grip.vertices] == g]
-        pv = grip.path.velocities(x[rows], 0.0)
+        pv = grip.path.velocities(x[rows], 0.0, rows)
         if grip.axis is not None and not np.isin(rows, model.pinned).all():
             slide = ~np.isin(rows, model.pinned)
             pv[slide] = np.einsum("ni,i->n", pv[slide], grip.axis)[:, None] * grip.axis
