@@ -58,8 +58,11 @@ class SkinPath:
     triangles then.  A skinned body is skinned only on those triangles."""
 
     def __init__(self, collider: MeshCollider, vertices: np.ndarray, points: np.ndarray,
-                 t0: float, drive_end: float):
-        face, w, _ = MeshProximity(collider).closest(points, t0)
+                 t0: float, drive_end: float, closest=None):
+        """``closest``: (face, weights) of the points' closest points at t0, if
+        the caller has them (MeshProximity.closest)."""
+        face, w = (closest if closest is not None
+                   else MeshProximity(collider).closest(points, t0)[:2])
         used = np.zeros(collider.triangles.shape[0], dtype=bool)
         used[face] = True
         self.surface = collider
@@ -125,14 +128,15 @@ def add_skin_grips(cfg, model, t: float) -> None:
         body = make_collider(cspec, True, f"colliders.{k}")
         if model.pattern_vertex is not None:
             cand = np.unique(model.pattern_vertex[cand])
-        _, _, dist = MeshProximity(body.body).closest(x[cand], t)
+        face, w, dist = MeshProximity(body.body).closest(x[cand], t)
         # a vertex pinned already keeps its pin
-        near = cand[(dist <= follow_spec.within) & ~np.isin(cand, model.pinned)]
+        keep = (dist <= follow_spec.within) & ~np.isin(cand, model.pinned)
+        near = cand[keep]
         if near.size == 0:
             raise ConfigError(f"cloth.{p}.follow_skin.within", follow_spec.within,
                               f"a distance reaching collider {cspec.name!r}: the region's "
                               f"closest vertex is {dist.min():.4g} m from it at t = {t:g} s")
-        path = SkinPath(body.body, near, x[near], t, body.drive_end)
+        path = SkinPath(body.body, near, x[near], t, body.drive_end, (face[keep], w[keep]))
         grips.append(Grip(f"{spec.name}.follow_skin", near, None, path))
         model.pinned = np.union1d(model.pinned, near).astype(np.int64)
         if model.slide_vertices is not None and model.slide_vertices.size:
