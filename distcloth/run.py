@@ -243,6 +243,10 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
     for c in sim.contact.colliders:
         if c.region is not None:
             log(comm, f"collider {c.name} in contact: {c.region}")
+        spread = getattr(c.body, "arm_spread_degrees", None)
+        if spread is not None:
+            log(comm, f"collider {c.name}: arms turned out up to {spread[0]:.1f} (left) and "
+                      f"{spread[1]:.1f} (right) degrees to keep the upper arms off the chest")
     writer = open_writer(sim, cfg, comm, path, sim.diagnostic_names(),
                          {"steps": n_steps, "output_every_steps": every,
                           "checkpoint": os.path.basename(checkpoint_path(path)), **image,

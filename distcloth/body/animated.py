@@ -13,8 +13,10 @@ import copy
 
 import numpy as np
 
+from .arm_clearance import solve as arm_clearance_solve
 from .bvh import BvhClip
 from .clip import Timeline
+from .regions import dominant_bone
 from .retarget import LIMB_JOINTS, BodyMotion
 from .skeleton_fit import fit_skeleton
 from .skinning import skin
@@ -33,10 +35,13 @@ class AnimatedBody:
     ``mapping``: body joint -> capture joint names replacing the CMU ones
     (retarget.py).  ``aligned``: the joints whose rest bone is aligned to the capture's
     (retarget.py); the limbs by default, so the body's torso keeps its own
-    posture instead of taking the capture skeleton's spine curve."""
+    posture instead of taking the capture skeleton's spine curve.  ``arm_clearance``
+    (m): turn each arm out, where the capture brings it closer, until its
+    upper arm is this far from the chest (arm_clearance.py); None: as captured."""
 
     def __init__(self, vertices, triangles, clip: BvhClip, timeline: Timeline, method: str = "dqs",
-                 root_motion: str = "keep", aligned=LIMB_JOINTS, mapping=None):
+                 root_motion: str = "keep", aligned=LIMB_JOINTS, mapping=None,
+                 arm_clearance: float | None = None):
         self.rest = np.ascontiguousarray(vertices, dtype=np.float64)
         self.triangles = np.asarray(triangles, dtype=np.int64)
         self.method = method
@@ -45,7 +50,20 @@ class AnimatedBody:
         self.motion = BodyMotion(clip, self.skeleton, timeline, root_motion, mapping=mapping,
                                  aligned=aligned)
         self.end_time = float(self.motion.end_time)
+        if arm_clearance is not None:
+            arm_clearance_solve(self.skeleton, self.rest, self.triangles,
+                                dominant_bone(self.idx, self.w), self._skin_some,
+                                lambda times: self.motion.pose(times)[1:], self._use_spread,
+                                self.end_time, float(arm_clearance))
         self.clear_cache()
+
+    def _use_spread(self, spread) -> None:
+        self.motion.spread = spread
+
+    def _skin_some(self, times, ids) -> np.ndarray:
+        """(F, k, 3) rest vertices ``ids`` skinned at ``times``."""
+        R, t = self.motion.transforms(np.asarray(times, dtype=np.float64))
+        return skin(self.method, self.rest[ids], self.idx[ids], self.w[ids], R, t)
 
     def part(self, ids, triangles) -> "AnimatedBody":
         """The same rig and motion on the vertices ``ids`` only, with

@@ -47,6 +47,7 @@ from typing import Collection, Mapping
 
 import numpy as np
 
+from .arm_clearance import abduct
 from .bvh import BvhClip, bvh_global, rest_positions
 from .clip import Timeline, blend_from_identity, sample, with_root_motion
 from .skeleton import Skeleton
@@ -277,6 +278,8 @@ class BodyMotion:
         self.end_time = timeline.total(clip.duration)  # also checks the timeline against the clip
         self.retargeting = make_retargeting(self.clip, skeleton, mapping, frame, scale,
                                             timeline.start, timeline.clip_end(clip.duration), aligned)
+        # (times) -> (F, 2) arms' extra abduction (arm_clearance.ArmSpread); None: as captured
+        self.spread = None
 
     def pose(self, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Blend weights (F,), bone rotations (F, J, 3, 3) and joint positions (F, J, 3)."""
@@ -285,6 +288,8 @@ class BodyMotion:
         u = self.timeline.clip_time(times, self.clip.duration)
         rot, joints = retarget_pose(self.retargeting, sample(self.clip, u))
         rot = blend_from_identity(rot, w[:, None])
+        if self.spread is not None:
+            rot = abduct(self.skeleton, rot, self.spread(times))
         pelvis = self.skeleton.index("pelvis")
         rest_root = np.broadcast_to(self.skeleton.rest[pelvis], (len(times), 3)).copy()
         # blending out after the clip: rest pose where the walk ended (horizontally)

@@ -412,6 +412,13 @@ class SkinnedMeshCollider(MeshCollider):
     def is_deforming(self) -> bool:
         return True
 
+    @property
+    def arm_spread_degrees(self):
+        """(left, right) largest extra abduction of the arms (body/arm_clearance.py),
+        or None when the arms move as captured."""
+        spread = self.body.motion.spread
+        return None if spread is None else tuple(float(a) for a in np.degrees(spread.largest))
+
     def _local(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         return self.body.positions(t) @ self.A.T + self.b, self.body.velocities(t) @ self.A.T
 

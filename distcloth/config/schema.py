@@ -417,6 +417,13 @@ class AnimationSpec:
                                   "within this distance of the cloth where it starts are the only "
                                   "ones in its contact (EG07 tutorial Part 2 §2.3; a skirt never "
                                   "tests the arms); null: the whole body", unit="m", above=0)
+    arm_clearance: float | None = setting(None, doc="where the capture brings an upper arm "
+                                          "closer than this to the chest, the whole arm is "
+                                          "turned out about the shoulder (the least angle, "
+                                          "smooth in time) until it is this far: room for the "
+                                          "sleeves and bodice that would otherwise be pinched "
+                                          "between arm and chest (docs/bodies.md); null: the "
+                                          "arms as captured", unit="m", above=0)
 
 
 @dataclass(frozen=True)

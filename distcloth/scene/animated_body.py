@@ -38,7 +38,8 @@ def load_animated_collider(spec, key: str, motion: RigidMotion | None = None) ->
         raise collider_file_error(spec, key, exc) from None
     try:
         body = AnimatedBody(vertices, triangles, clip, timeline, method=anim.skinning,
-                            root_motion=anim.root_motion, mapping=dict(anim.joints))
+                            root_motion=anim.root_motion, mapping=dict(anim.joints),
+                            arm_clearance=anim.arm_clearance)
     except MappingError as exc:     # a body joint the capture has no joint for
         raise ConfigError(f"{key}.animation.joints", dict(anim.joints),
                           f"capture joints of {anim.motion} ({exc})") from None
