@@ -35,14 +35,15 @@ class StepContext:
         return f
 
     def begin_step(self, x0) -> None:
-        """Tell the terms that keep something of a step's start state (the
+        """Tell the terms that follow something from step to step (the
         dihedral angles' branch) where the step starts (local rows)."""
         for t in self.terms:
             if hasattr(t, "at_step_start"):
                 t.at_step_start(x0)
 
     def end_step(self) -> None:
-        """The step is over: the terms forget its start state."""
+        """The step attempt is over (for terms that keep something of it only
+        for its duration)."""
         for t in self.terms:
             if hasattr(t, "at_step_end"):
                 t.at_step_end()

@@ -370,11 +370,10 @@ def test_energy_weight_scales_energy_not_forces():
 
 def test_a_fold_pressed_flat_keeps_its_force_across_pi():
     # two triangles folded on each other (dihedral angle pi - 0.05 from a flat
-    # rest): a trial state of the step (the predictor, a Newton iterate) that
-    # folds them 0.1 rad further crosses +-pi.  On the branch of the step's
-    # start its angle is pi + 0.05 and the force keeps opening the fold, as
-    # just before the crossing (same direction, a little larger); without the
-    # branch the raw angle -pi + 0.05 reverses the force, which pushed folds
+    # rest): a state that folds them 0.1 rad further crosses +-pi.  Followed
+    # from the step's start its angle is pi + 0.05 and the force keeps opening
+    # the fold, as just before the crossing (same direction, a little larger);
+    # the raw angle -pi + 0.05 would reverse the force, which pushed folds
     # further through and kept a sewn skirt jittering
     hinge = np.array([[0, 1, 2, 3]])
     rest = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]])
@@ -395,14 +394,22 @@ def test_a_fold_pressed_flat_keeps_its_force_across_pi():
         return f
 
     before = force(start)
-    raw = force(crossed)
+    raw = force(crossed)          # no step has started: the raw angle
     term.at_step_start(start)
     on_branch = force(crossed)
-    term.at_step_end()
-    assert np.allclose(force(crossed), raw)       # outside a step: the raw angle
     cos_raw = np.sum(raw * before) / np.linalg.norm(raw) / np.linalg.norm(before)
     cos_branch = np.sum(on_branch * before) / np.linalg.norm(on_branch) / np.linalg.norm(before)
     assert cos_raw < -0.99 and cos_branch > 0.99
     # |theta - theta0| is pi + 0.05 against pi - 0.05: the force grows by that ratio
     ratio = np.linalg.norm(on_branch) / np.linalg.norm(before)
     assert abs(ratio - (np.pi + 0.05) / (np.pi - 0.05)) < 1e-9
+    # the energy the forces derive from, on the same branch: continuous across pi
+    w = term.kb[0] * term.weight[0]
+    assert abs(term.energy(crossed) - w * (np.pi + 0.05) ** 2) < 1e-12
+    # the next step starts where this one ended: the angle is followed in time
+    # (a fold that went past flat stays past it), and folding back recrosses
+    term.at_step_start(crossed)
+    assert abs(term.energy(crossed) - w * (np.pi + 0.05) ** 2) < 1e-12
+    term.at_step_start(folded(np.pi + 0.3))
+    term.at_step_start(folded(np.pi - 0.2))
+    assert abs(term.energy(folded(np.pi - 0.2)) - w * (np.pi - 0.2) ** 2) < 1e-12

@@ -171,6 +171,11 @@ def hinge_angles(x, hinge) -> np.ndarray:
     return np.arctan2(s, c)
 
 
+def _unwrapped(theta, near):
+    """``theta`` moved by multiples of 2 pi to within pi of ``near``."""
+    return theta - 2.0 * np.pi * np.round((theta - near) / (2.0 * np.pi))
+
+
 def _cot(u, v):
     return np.einsum("ij,ij->i", u, v) / np.linalg.norm(np.cross(u, v), axis=1)
 
@@ -341,15 +346,17 @@ def dihedral_forces(x, hinge, theta0, kb, weight, force, grad, coef, branch):
 
 
 @njit(cache=True)
-def dihedral_discrete_gradient(x0, x1, xm, hinge, theta0, kb, force):
+def dihedral_discrete_gradient(x0, x1, xm, hinge, theta0, kb, force, branch):
     """force += the dihedral bending force of a step from x0 to x1 (xm their
     midpoint): -kb (d0 + d1) gbar per hinge, d = theta - theta0, with gbar a
     discrete gradient of theta (Gonzalez 1996): gbar = g_m + (theta1 - theta0
     - g_m . r) r / |r|^2, g_m = grad theta at xm, r = x1 - x0 on the hinge's
     four vertices less its mean (a translation: g_m . r = g_m . (x1 - x0) and
     gbar keeps summing to zero).  gbar . (x1 - x0) = theta1 - theta0, so the
-    force's work is -(U1 - U0) exactly; gbar - g_m = O(|r|^2)."""
+    force's work is -(U1 - U0) exactly; gbar - g_m = O(|r|^2).  ``branch``
+    (ne,) or empty: both angles taken within pi of it, as in dihedral_forces."""
     g = np.empty((4, 3))
+    follow = branch.shape[0] == hinge.shape[0]
     r = np.empty((4, 3))
     for h in range(hinge.shape[0]):
         i0 = hinge[h, 0]
@@ -358,6 +365,9 @@ def dihedral_discrete_gradient(x0, x1, xm, hinge, theta0, kb, force):
         i3 = hinge[h, 3]
         t0 = hinge_angle_gradient(x0, i0, i1, i2, i3, g)
         t1 = hinge_angle_gradient(x1, i0, i1, i2, i3, g)
+        if follow:
+            t0 -= 2.0 * np.pi * np.floor((t0 - branch[h]) / (2.0 * np.pi) + 0.5)
+            t1 -= 2.0 * np.pi * np.floor((t1 - branch[h]) / (2.0 * np.pi) + 0.5)
         hinge_angle_gradient(xm, i0, i1, i2, i3, g)
         rr = 0.0
         gr = 0.0
@@ -743,16 +753,22 @@ class DihedralBendingTerm(_HingeTerm):
         self._x = None
 
     def at_step_start(self, x0):
-        """Angles within the step are taken on the branch of the start state's:
-        a step's trial states (the predictor x0 + h v0, Newton's iterates) are
-        not collision-free, and a fold pressed flat by self-contact (theta near
-        +-pi) crosses +-pi there.  Its angle would jump by 2 pi and its force
-        reverse, pushing the fold further through; on a sewn skirt such folds
-        kept jittering at 1-2 m/s and never settled."""
-        self.branch = np.ascontiguousarray(hinge_angles(x0, self.hinges))
-
-    def at_step_end(self):
-        self.branch = np.zeros(0)
+        """Every angle is followed continuously in time: a step's angles are
+        taken within pi of its start's, and the start's within pi of the
+        previous step's start (a hinge turns by far less than pi in a step).
+        A fold pressed flat (theta near +-pi) that passes +-pi then goes on
+        past it instead of jumping by 2 pi: its force does not reverse, and its
+        energy stays continuous, so the forces are those of the energy the
+        guard measures.  Reset per step instead, a step's trial states (the
+        predictor, Newton's iterates, RK4's stages) saw continuous angles while
+        the committed states' energy jumped, and RK4 on a heavy sheet gained
+        energy; taken canonically throughout, folds that trial states carry
+        through +-pi had their force reversed and a sewn skirt's kept
+        jittering at 1-2 m/s."""
+        theta = hinge_angles(x0, self.hinges)
+        if self.branch.shape == theta.shape:
+            theta = _unwrapped(theta, self.branch)
+        self.branch = np.ascontiguousarray(theta)
 
     def evaluate(self, x, v, force, want_jac):
         energy, worst = dihedral_forces(x, self.hinges, self.theta0, self.kb, self.weight,
@@ -767,7 +783,8 @@ class DihedralBendingTerm(_HingeTerm):
         xm = 0.5 * (x0 + x1)
         if want_jac:     # the Newton matrix: the Hessian at the midpoint
             self.evaluate(xm, v, np.zeros_like(force), True)
-        dihedral_discrete_gradient(x0, x1, xm, self.hinges, self.theta0, self.kb, force)
+        dihedral_discrete_gradient(x0, x1, xm, self.hinges, self.theta0, self.kb, force,
+                                   self.branch)
         return {}
 
     def stiffness_product(self, w, out):
@@ -784,5 +801,8 @@ class DihedralBendingTerm(_HingeTerm):
             add_gauss_newton_blocks(self.grad, self.coef, alpha, self.slots, data)
 
     def energy(self, x):
-        d = hinge_angles(x, self.hinges) - self.theta0
+        theta = hinge_angles(x, self.hinges)
+        if self.branch.shape == theta.shape:
+            theta = _unwrapped(theta, self.branch)
+        d = theta - self.theta0
         return float(np.sum(self.kb * d * d * self.weight))
