@@ -154,5 +154,10 @@ def test_collision_scene_rank_invariance(tmp_path):
             assert f["diagnostics/stage_calls/collision:bodies"][:].min() >= 1
     L = math.sqrt(2.0)                     # the 1 m cloth's diagonal
     assert frames[3].shape == frames[1].shape
-    assert np.abs(frames[3] - frames[1]).max() <= 1e-8 * L
+    # before contact the runs agree to 6e-13 m; from the landing (0.2 s) the
+    # contact set amplifies the solver-level difference about tenfold per
+    # 0.05 s (measured 2e-10 at 0.25 s, 2e-8 at 0.4 s, where a fold pressed
+    # flat passes +-pi), so 1e-7 L bounds it, five orders below the 2 mm
+    # contact offset
+    assert np.abs(frames[3] - frames[1]).max() <= 1e-7 * L
     assert np.nanmax(pens[1]) <= 0.1 * 0.002
