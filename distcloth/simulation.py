@@ -508,13 +508,10 @@ class Simulation:
     def _attempt(self, h, t_end):
         """One tentative step of size h: (result, None, False) if accepted and
         committed (the state's time becomes ``t_end``), else (None, reason,
-        fatal) with the state unchanged.  The force terms see the step's start
-        state for its duration (StepContext.begin_step)."""
+        fatal) with the state unchanged.  The force terms are told the step's
+        start state first (StepContext.begin_step)."""
         self.ctx.begin_step(self.state.x)
-        try:
-            return self._try_step(h, t_end)
-        finally:
-            self.ctx.end_step()
+        return self._try_step(h, t_end)
 
     def _try_step(self, h, t_end):
         state, pipe, contact = self.state, self.pipeline, self.contact

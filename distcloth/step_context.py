@@ -41,13 +41,6 @@ class StepContext:
             if hasattr(t, "at_step_start"):
                 t.at_step_start(x0)
 
-    def end_step(self) -> None:
-        """The step attempt is over (for terms that keep something of it only
-        for its duration)."""
-        for t in self.terms:
-            if hasattr(t, "at_step_end"):
-                t.at_step_end()
-
     def stiffness_product(self, w) -> np.ndarray:
         """(df/dx) w at the last evaluation, on every local row."""
         out = np.zeros((self.n_local, 3))

@@ -18,9 +18,10 @@ the shoulder (away from the armpit, where arm and chest skin are one
 surface) is at least ``clearance`` from the chest's skin.  The chest skin
 moves with δ only through its small arm weights, so the search turns the
 upper arm's skinned points rigidly about the shoulder (a bisection; the
-distance grows with δ).  The angles are then made smooth in time: a running
-maximum over ±``WINDOW`` (the gap is kept between grid times too) and a
-running mean over the same window, interpolated linearly between grid times.
+distance grows with δ), and again from the turned pose (``PASSES``).  The
+angles are then made smooth in time: a running maximum over ±2 ``WINDOW``
+and a running mean over ±``WINDOW`` (never below the angles found),
+interpolated linearly between grid times.
 Where the captured arm is clear already, δ = 0 and the pose is the capture's.
 
 Kernels only: arrays in, arrays out.

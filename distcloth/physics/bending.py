@@ -172,8 +172,9 @@ def hinge_angles(x, hinge) -> np.ndarray:
 
 
 def _unwrapped(theta, near):
-    """``theta`` moved by multiples of 2 pi to within pi of ``near``."""
-    return theta - 2.0 * np.pi * np.round((theta - near) / (2.0 * np.pi))
+    """Arrays: ``theta`` moved by multiples of 2 pi to within pi of ``near``
+    (angle_near, vectorised)."""
+    return theta - 2.0 * np.pi * np.floor((theta - near) / (2.0 * np.pi) + 0.5)
 
 
 def _cot(u, v):
@@ -312,6 +313,12 @@ def hinge_angle_gradient(x, i0, i1, i2, i3, g):
 
 
 @njit(cache=True)
+def angle_near(theta, near):
+    """``theta`` moved by a multiple of 2 pi to within pi of ``near``."""
+    return theta - 2.0 * np.pi * np.floor((theta - near) / (2.0 * np.pi) + 0.5)
+
+
+@njit(cache=True)
 def dihedral_forces(x, hinge, theta0, kb, weight, force, grad, coef, branch):
     """force += -2 kb (theta - theta0) grad theta per hinge.
 
@@ -327,10 +334,7 @@ def dihedral_forces(x, hinge, theta0, kb, weight, force, grad, coef, branch):
         g = grad[h]
         theta = hinge_angle_gradient(x, hinge[h, 0], hinge[h, 1], hinge[h, 2], hinge[h, 3], g)
         if follow:
-            if theta - branch[h] > np.pi:
-                theta -= 2.0 * np.pi
-            elif theta - branch[h] < -np.pi:
-                theta += 2.0 * np.pi
+            theta = angle_near(theta, branch[h])
         d = theta - theta0[h]
         if abs(d) > worst:
             worst = abs(d)
@@ -366,8 +370,8 @@ def dihedral_discrete_gradient(x0, x1, xm, hinge, theta0, kb, force, branch):
         t0 = hinge_angle_gradient(x0, i0, i1, i2, i3, g)
         t1 = hinge_angle_gradient(x1, i0, i1, i2, i3, g)
         if follow:
-            t0 -= 2.0 * np.pi * np.floor((t0 - branch[h]) / (2.0 * np.pi) + 0.5)
-            t1 -= 2.0 * np.pi * np.floor((t1 - branch[h]) / (2.0 * np.pi) + 0.5)
+            t0 = angle_near(t0, branch[h])
+            t1 = angle_near(t1, branch[h])
         hinge_angle_gradient(xm, i0, i1, i2, i3, g)
         rr = 0.0
         gr = 0.0
