@@ -247,6 +247,10 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
         if spread is not None:
             log(comm, f"collider {c.name}: arms turned out up to {spread[0]:.1f} (left) and "
                       f"{spread[1]:.1f} (right) degrees to keep the upper arms off the chest")
+        legs = getattr(c.body, "leg_spread_degrees", None)
+        if legs is not None:
+            log(comm, f"collider {c.name}: legs turned apart up to {legs:.1f} degrees each to "
+                      f"keep the lower legs off each other")
     writer = open_writer(sim, cfg, comm, path, sim.diagnostic_names(),
                          {"steps": n_steps, "output_every_steps": every,
                           "checkpoint": os.path.basename(checkpoint_path(path)), **image,

@@ -25,7 +25,8 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENES = ("skirt_walking", "dress_walking", "dress_sleeves_walking", "tshirt_walking")
+SCENES = ("skirt_walking", "dress_walking", "dress_sleeves_walking", "tshirt_walking",
+          "trousers_walking")
 FRAME = 1.0 / 30.0
 GROUPS = {"collisions": ("collision:bodies", "collision:response"),
           "solve": ("solve", "assembly"),

@@ -14,6 +14,7 @@ import copy
 import numpy as np
 
 from .arm_clearance import solve as arm_clearance_solve
+from .leg_clearance import solve as leg_clearance_solve
 from .bvh import BvhClip
 from .clip import Timeline
 from .regions import dominant_bone
@@ -37,11 +38,14 @@ class AnimatedBody:
     (retarget.py); the limbs by default, so the body's torso keeps its own
     posture instead of taking the capture skeleton's spine curve.  ``arm_clearance``
     (m): turn each arm out, where the capture brings it closer, until its
-    upper arm is this far from the chest (arm_clearance.py); None: as captured."""
+    upper arm is this far from the chest (arm_clearance.py); None: as captured.
+    ``leg_clearance`` (m): turn both legs apart about the hips, where the
+    capture brings the lower legs closer, until they are this far apart
+    (leg_clearance.py); None: as captured."""
 
     def __init__(self, vertices, triangles, clip: BvhClip, timeline: Timeline, method: str = "dqs",
                  root_motion: str = "keep", aligned=LIMB_JOINTS, mapping=None,
-                 arm_clearance: float | None = None):
+                 arm_clearance: float | None = None, leg_clearance: float | None = None):
         self.rest = np.ascontiguousarray(vertices, dtype=np.float64)
         self.triangles = np.asarray(triangles, dtype=np.int64)
         self.method = method
@@ -55,10 +59,17 @@ class AnimatedBody:
                                 dominant_bone(self.idx, self.w), self._skin_some,
                                 lambda times: self.motion.pose(times)[1:], self._use_spread,
                                 self.end_time, float(arm_clearance))
+        if leg_clearance is not None:
+            leg_clearance_solve(self.skeleton, self.triangles, dominant_bone(self.idx, self.w),
+                                self._skin_some, lambda times: self.motion.pose(times)[1:],
+                                self._use_leg_spread, self.end_time, float(leg_clearance))
         self.clear_cache()
 
     def _use_spread(self, spread) -> None:
         self.motion.spread = spread
+
+    def _use_leg_spread(self, spread) -> None:
+        self.motion.leg_spread = spread
 
     def _skin_some(self, times, ids) -> np.ndarray:
         """(F, k, 3) rest vertices ``ids`` skinned at ``times``."""

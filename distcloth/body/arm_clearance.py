@@ -21,7 +21,7 @@ upper arm's skinned points rigidly about the shoulder (a bisection; the
 distance grows with δ), and again from the turned pose (``PASSES``).  The
 angles are then made smooth in time: a running maximum over ±2 ``WINDOW``
 and a running mean over ±``WINDOW`` (never below the angles found),
-interpolated linearly between grid times.
+interpolated linearly between grid times (limb_clearance.py).
 Where the captured arm is clear already, δ = 0 and the pose is the capture's.
 
 Kernels only: arrays in, arrays out.
@@ -32,54 +32,27 @@ import numpy as np
 
 from ..collision.colliders import MeshCollider
 from ..collision.mesh_query import MeshProximity
+from .limb_clearance import (FORWARD, SIDES, LimbSpread, axis_rotations, least_angle,
+                             limb_chain, solve_grid, solve_passes, turn_out)
 from .skeleton import Skeleton
 
 JUNCTION = 0.08          # m down the upper arm from the shoulder joint: below the armpit
-GRID = 1.0 / 60.0        # s between the times the angle is solved at
-WINDOW = 0.05            # s: the smoothing's half width
 MAX_ANGLE = np.radians(35.0)
-BISECTIONS = 14          # 35° / 2^14: 0.002°, 0.01 mm at the elbow
 PASSES = 3               # searches from the spread pose (solve)
-FORWARD = np.array([0.0, 0.0, 1.0])   # the body's front at rest (mesh frame: y up, front +z)
-SIDES = (("l", 1.0), ("r", -1.0))     # the left arm is at +x: turning it about +z by +δ lifts it
 
-
-def axis_rotations(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """(F, 3, 3) rotations by ``angles`` (F,) about the unit ``axes`` (F, 3) (Rodrigues)."""
-    k = axes / np.linalg.norm(axes, axis=1)[:, None]
-    K = np.zeros((len(k), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    K -= np.transpose(K, (0, 2, 1))
-    s, c = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+__all__ = ["JUNCTION", "abduct", "arm_chain", "axis_rotations", "solve"]
 
 
 def arm_chain(skeleton: Skeleton, side: str) -> list[int]:
     """The shoulder joint of ``side`` and every joint below it."""
-    chain, todo = [], [skeleton.index(f"{side}_shoulder")]
-    while todo:
-        j = todo.pop()
-        chain.append(j)
-        todo.extend(int(c) for c in skeleton.children(j))
-    return chain
+    return limb_chain(skeleton, f"{side}_shoulder")
 
 
 def abduct(skeleton: Skeleton, rot: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Bone rotations (F, J, 3, 3) with each whole arm turned about its
     shoulder by ``angles`` (F, 2: left, right; radians, away from the body)
-    about the chest's forward axis.  Joint positions follow by forward
-    kinematics (retarget.body_fk): a rotation of every bone of the chain is
-    a rotation of the chain about its first joint."""
-    out = rot.copy()
-    forward = rot[:, skeleton.index("chest")] @ FORWARD
-    for k, (side, sign) in enumerate(SIDES):
-        a = angles[:, k]
-        if not np.any(a):
-            continue
-        Q = axis_rotations(forward, sign * a)
-        for j in arm_chain(skeleton, side):
-            out[:, j] = Q @ rot[:, j]
-    return out
+    about the chest's forward axis."""
+    return turn_out(skeleton, rot, angles, "shoulder", "chest")
 
 
 def _clear_angle(points, pivot, axis, chest: MeshProximity, clearance: float) -> float:
@@ -88,52 +61,12 @@ def _clear_angle(points, pivot, axis, chest: MeshProximity, clearance: float) ->
     def gap(delta):
         Q = axis_rotations(axis[None], np.array([delta]))[0]
         return chest.closest((points - pivot) @ Q.T + pivot, max_distance=clearance)[2].min()
-    if gap(0.0) >= clearance:
-        return 0.0
-    if gap(MAX_ANGLE) < clearance:
-        return MAX_ANGLE
-    lo, hi = 0.0, MAX_ANGLE
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if gap(mid) >= clearance else (mid, hi)
-    return hi
-
-
-def smooth_max(times: np.ndarray, values: np.ndarray, window: float) -> np.ndarray:
-    """Running maximum over ±2 window, then running mean over ±window (per
-    column): every mean is over maxima whose windows all hold t, so the
-    result is nowhere below ``values``."""
-    def running(vals, half, reduce):
-        out = np.empty_like(vals)
-        for i, t in enumerate(times):
-            out[i] = reduce(vals[np.abs(times - t) <= half + 1e-12], axis=0)
-        return out
-    return running(running(values, 2.0 * window, np.max), window, np.mean)
-
-
-class ArmSpread:
-    """Abduction angles (F, 2: left, right) at any scene time: solved on a
-    grid once (``solve``), interpolated linearly, held after its last time
-    (the body holds its last pose)."""
-
-    def __init__(self, times: np.ndarray, angles: np.ndarray):
-        self.times = np.asarray(times, dtype=np.float64)
-        self.angles = np.asarray(angles, dtype=np.float64)
-
-    def __call__(self, times) -> np.ndarray:
-        t = np.atleast_1d(np.asarray(times, dtype=np.float64))
-        return np.stack([np.interp(t, self.times, self.angles[:, k])
-                         for k in range(2)], axis=1)
-
-    @property
-    def largest(self) -> np.ndarray:
-        """(2,) the largest angle of each arm, radians."""
-        return self.angles.max(axis=0) if len(self.angles) else np.zeros(2)
+    return least_angle(gap, clearance, MAX_ANGLE)
 
 
 def solve(skeleton: Skeleton, rest_vertices: np.ndarray, triangles: np.ndarray,
           dominant: np.ndarray, skin_at, pose_at, use, end_time: float,
-          clearance: float) -> ArmSpread:
+          clearance: float) -> LimbSpread:
     """The angles on a grid over [0, end_time].
 
     ``dominant`` (V,): each rest vertex's dominant bone (the chest's skin: the
@@ -156,29 +89,13 @@ def solve(skeleton: Skeleton, rest_vertices: np.ndarray, triangles: np.ndarray,
         arms.append(np.flatnonzero((dominant == sh) & (along > JUNCTION)))
     ids = np.concatenate([chest_ids] + arms)
     n_chest = len(chest_ids)
-    times = np.linspace(0.0, end_time, int(np.ceil(end_time / GRID)) + 1)
-    spread = ArmSpread(times, np.zeros((len(times), 2)))
-    needed = np.zeros((len(times), 2))      # the least angle found to give the gap
-    for _ in range(PASSES):
-        use(spread)
-        rot, joints = pose_at(times)
-        skinned = skin_at(times, ids)
-        extra = np.zeros((len(times), 2))
-        for f in range(len(times)):
-            chest = MeshProximity(MeshCollider.static(skinned[f, :n_chest], chest_tri))
-            forward = rot[f, skeleton.index("chest")] @ FORWARD
-            start = n_chest
-            for k, (side, sign) in enumerate(SIDES):
-                pts = skinned[f, start:start + len(arms[k])]
-                start += len(arms[k])
-                pivot = joints[f, skeleton.index(f"{side}_shoulder")]
-                extra[f, k] = _clear_angle(pts, pivot, sign * forward, chest, clearance)
-        if not extra.any():
-            break
-        # where the smoothed angle is not enough, it needs this much more; elsewhere
-        # keep what was needed (smoothing the smoothed angles again would widen
-        # the turn by a window each pass)
-        needed = np.where(extra > 0.0, np.maximum(needed, spread.angles + extra), needed)
-        spread = ArmSpread(times, np.minimum(smooth_max(times, needed, WINDOW), MAX_ANGLE))
-    use(spread)
-    return spread
+    shoulders = [skeleton.index(f"{side}_shoulder") for side, _ in SIDES]
+
+    def frame_angles(rot, joints, skinned):
+        chest = MeshProximity(MeshCollider.static(skinned[:n_chest], chest_tri))
+        forward = rot[skeleton.index("chest")] @ FORWARD
+        arm_points = np.split(skinned[n_chest:], [len(arms[0])])
+        return [_clear_angle(pts, joints[j], sign * forward, chest, clearance)
+                for pts, j, (_, sign) in zip(arm_points, shoulders, SIDES)]
+    return solve_passes(solve_grid(end_time), PASSES, MAX_ANGLE, ids, skin_at, pose_at, use,
+                        frame_angles)

@@ -48,6 +48,7 @@ from typing import Collection, Mapping
 import numpy as np
 
 from .arm_clearance import abduct
+from .leg_clearance import spread_legs
 from .bvh import BvhClip, bvh_global, rest_positions
 from .clip import Timeline, blend_from_identity, sample, with_root_motion
 from .skeleton import Skeleton
@@ -278,8 +279,10 @@ class BodyMotion:
         self.end_time = timeline.total(clip.duration)  # also checks the timeline against the clip
         self.retargeting = make_retargeting(self.clip, skeleton, mapping, frame, scale,
                                             timeline.start, timeline.clip_end(clip.duration), aligned)
-        # (times) -> (F, 2) arms' extra abduction (arm_clearance.ArmSpread); None: as captured
+        # (times) -> (F, 2) arms' extra abduction (arm_clearance.py); None: as captured
         self.spread = None
+        # (times) -> (F, 2) legs' turn apart about the hips (leg_clearance.py); None: as captured
+        self.leg_spread = None
 
     def pose(self, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Blend weights (F,), bone rotations (F, J, 3, 3) and joint positions (F, J, 3)."""
@@ -290,6 +293,8 @@ class BodyMotion:
         rot = blend_from_identity(rot, w[:, None])
         if self.spread is not None:
             rot = abduct(self.skeleton, rot, self.spread(times))
+        if self.leg_spread is not None:
+            rot = spread_legs(self.skeleton, rot, self.leg_spread(times))
         pelvis = self.skeleton.index("pelvis")
         rest_root = np.broadcast_to(self.skeleton.rest[pelvis], (len(times), 3)).copy()
         # blending out after the clip: rest pose where the walk ended (horizontally)

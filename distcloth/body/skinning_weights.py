@@ -86,7 +86,10 @@ __all__ = ["Bones", "bone_segments", "cotangent_laplacian", "segment_distances",
 
 HEAT_C = 1.0
 MIN_WEIGHT = 0.01
-MAX_INFLUENCES = 4
+# influences kept per vertex: at the sides of the waist bone heat gives the
+# pelvis, spine and chest about 0.3 each and an upper arm and a thigh about
+# 0.1 each, so a fourth slot would hold one or the other (_sparsify)
+MAX_INFLUENCES = 6
 LEAF_FAR = 0.6        # a leaf bone aims at the centroid of its region's far part
 
 
@@ -350,7 +353,16 @@ def bone_heat(vertices, triangles, heads, tails, owner=None, trusted=None, *,
 
 
 def _sparsify(W, k, min_weight):
+    """The k largest weights of each row less the (k+1)-th, clipped, then
+    ``min_weight`` and renormalised.  Less the (k+1)-th, the truncation is
+    continuous in W: where two neighbouring vertices' k-th and (k+1)-th
+    bones swap (an upper arm's and a thigh's 0.1 at the waist), both weigh
+    about zero on either side.  Plain top-k truncation gave one vertex the
+    arm's 10 % and its neighbour the thigh's, and the walk stretched skin
+    edges between them up to 3.7 times (1.7 so, with k = 6)."""
     W = np.clip(W, 0.0, None)
+    if W.shape[1] > k:
+        W = np.clip(W - np.partition(W, -(k + 1), axis=1)[:, -(k + 1)][:, None], 0.0, None)
     if W.shape[1] < k:                     # fewer bones than columns: pad with zeros
         W = np.concatenate([W, np.zeros((W.shape[0], k - W.shape[1]))], axis=1)
     idx = np.argsort(-W, axis=1, kind="stable")[:, :k]
@@ -364,7 +376,7 @@ def _sparsify(W, k, min_weight):
 
 def skinning_weights(vertices, triangles, skeleton: Skeleton, girdles: bool = True, **kwargs):
     """Bone heat weights of the skeleton's bones (``bone_segments``):
-    ``(idx (V, 4), w (V, 4))``, bone index = joint index."""
+    ``(idx (V, k), w (V, k))``, k = MAX_INFLUENCES, bone index = joint index."""
     bones = bone_segments(vertices, triangles, skeleton, girdles=girdles)
     return bone_heat(vertices, triangles, bones.heads, bones.tails, bones.owner, bones.trusted,
                      **kwargs)

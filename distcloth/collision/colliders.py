@@ -419,6 +419,13 @@ class SkinnedMeshCollider(MeshCollider):
         spread = self.body.motion.spread
         return None if spread is None else tuple(float(a) for a in np.degrees(spread.largest))
 
+    @property
+    def leg_spread_degrees(self):
+        """Largest turn of each leg apart about its hip (body/leg_clearance.py),
+        or None when the legs move as captured."""
+        spread = self.body.motion.leg_spread
+        return None if spread is None else float(np.degrees(spread.largest.max()))
+
     def _local(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         return self.body.positions(t) @ self.A.T + self.b, self.body.velocities(t) @ self.A.T
 

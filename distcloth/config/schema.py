@@ -424,6 +424,13 @@ class AnimationSpec:
                                           "sleeves and bodice that would otherwise be pinched "
                                           "between arm and chest (docs/bodies.md); null: the "
                                           "arms as captured", unit="m", above=0)
+    leg_clearance: float | None = setting(None, doc="where the capture brings the lower legs "
+                                          "(shins and feet) closer than this to each other, "
+                                          "both legs are turned apart about the hips (the least "
+                                          "angle, smooth in time) until they are this far: "
+                                          "room for trouser legs that would otherwise be "
+                                          "pinched between the ankles (docs/bodies.md); null: "
+                                          "the legs as captured", unit="m", above=0)
 
 
 @dataclass(frozen=True)

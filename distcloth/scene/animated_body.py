@@ -39,7 +39,8 @@ def load_animated_collider(spec, key: str, motion: RigidMotion | None = None) ->
     try:
         body = AnimatedBody(vertices, triangles, clip, timeline, method=anim.skinning,
                             root_motion=anim.root_motion, mapping=dict(anim.joints),
-                            arm_clearance=anim.arm_clearance)
+                            arm_clearance=anim.arm_clearance,
+                            leg_clearance=anim.leg_clearance)
     except MappingError as exc:     # a body joint the capture has no joint for
         raise ConfigError(f"{key}.animation.joints", dict(anim.joints),
                           f"capture joints of {anim.motion} ({exc})") from None
