@@ -14,9 +14,9 @@ import copy
 import numpy as np
 
 from .arm_clearance import solve as arm_clearance_solve
-from .leg_clearance import solve as leg_clearance_solve
 from .bvh import BvhClip
 from .clip import Timeline
+from .leg_clearance import solve as leg_clearance_solve
 from .regions import dominant_bone
 from .retarget import LIMB_JOINTS, BodyMotion
 from .skeleton_fit import fit_skeleton

@@ -3,7 +3,7 @@ legs out about the hips, frame by frame, that leaves a gap two trouser legs
 fit in.
 
 Why.  In a captured walk the swinging foot passes the standing ankle
-closely: in the CMU walk 07_01 the skinned ankles come within 2 mm of each
+closely: in the CMU walk 07_01 the skinned ankles come within 1 mm of each
 other.  Trouser legs there are pinched between two moving surfaces closer
 than their contact distances add up to (body, cloth, cloth, body): no
 position satisfies every contact, and the contact handling stretches the
@@ -20,7 +20,8 @@ legs only: the thighs meet at the crotch in the rest pose already, where
 the skin is one surface.  Both legs turn rigidly below the knee, so the
 search turns the skinned points (a bisection; the distance grows with δ).
 The angles are then made smooth in time as the arms' are
-(limb_clearance.py), on a finer grid.  Where the captured legs are clear already, δ = 0.
+(limb_clearance.py), on a finer grid.  Where the captured legs are clear
+already, δ = 0.
 
 Kernels only: arrays in, arrays out.
 """

@@ -48,9 +48,9 @@ from typing import Collection, Mapping
 import numpy as np
 
 from .arm_clearance import abduct
-from .leg_clearance import spread_legs
 from .bvh import BvhClip, bvh_global, rest_positions
 from .clip import Timeline, blend_from_identity, sample, with_root_motion
+from .leg_clearance import spread_legs
 from .skeleton import Skeleton
 
 # body joint -> capture joint (alternatives in order of preference) for the CMU
