@@ -135,3 +135,58 @@ if __name__ == "__main__":       # worker: mpiexec -n R python tests/test_collis
     _, _, _, vf, ee, hits = distributed()
     if MPI.COMM_WORLD.Get_rank() == 0:
         np.savez(sys.argv[1], vf=vf, ee=ee, hits=hits)
+
+
+def _box_pairs_brute_force(g, x0, x1, pad):
+    """Every vertex-face and edge-edge pair (not sharing a vertex, not all
+    kinematic) whose swept boxes grown by pad overlap, by enumeration."""
+    lo, hi = np.minimum(x0, x1) - pad, np.maximum(x0, x1) + pad
+
+    def boxes(ids):                                   # (m, k) vertex ids -> (m, 3) boxes
+        return lo[ids].min(axis=1), hi[ids].max(axis=1)
+
+    def overlap(a, b):
+        return np.all((a[0][:, None] <= b[1][None]) & (b[0][None] <= a[1][:, None]), axis=2)
+
+    v = np.arange(g.n_vertices)[:, None]
+    kin = g.kinematic
+    hit = overlap(boxes(v), boxes(g.tri))
+    hit &= ~(g.tri[None] == v[:, :, None]).any(axis=2)
+    hit &= ~(kin[:, None] & kin[g.tri].all(axis=1)[None])
+    vf = np.argwhere(hit)
+    hit = np.triu(overlap(boxes(g.edges), boxes(g.edges)), 1)
+    a, b = g.edges[:, None, :, None], g.edges[None, :, None, :]
+    hit &= ~(a == b).any(axis=(2, 3))
+    allkin = kin[g.edges].all(axis=1)
+    hit &= ~(allkin[:, None] & allkin[None])
+    return vf, np.argwhere(hit)
+
+
+def test_candidates_equal_box_brute_force():
+    """The vertex-face and edge-edge candidates of the traversal (each taken
+    from its primitives' owner triangles only) are exactly every pair whose
+    swept boxes overlap: two sheets on two ranks' objects and a kinematic
+    collider mesh, moving, in any order of the triangle pairs."""
+    from distcloth.collision.geometry import CollisionGeometry
+    from distcloth.collision.traverse import run_tests
+    from distcloth.scene import build_model
+    model = build_model(_scene())
+    x0 = snapshot(model)
+    rng = np.random.default_rng(7)
+    body = x0[: x0.shape[0] // 2][::3] + np.array([0.01, 0.0, -0.004])   # a coarse collider
+    btri = np.array([[i, i + 1, i + 2] for i in range(0, body.shape[0] - 2, 2)])
+    tri = np.asarray(model.triangles, dtype=np.int64)
+    owner = (np.arange(tri.shape[0]) * 7) % 2
+    rest = np.concatenate([x0, body])
+    g = CollisionGeometry(tri, model.num_vertices, owner, 2, [(body.shape[0], btri)], rest=rest)
+    x1 = rest + rng.normal(scale=0.002, size=rest.shape)
+    trees = g.trees(rest, x1, THICK)
+    tp = g.triangle_pairs(run_tests(trees, g.root_tests(trees, True)))
+    flip = rng.random(tp.shape[0]) < 0.5
+    tp[flip] = tp[flip][:, ::-1]
+    vf, ee = g.primitive_pairs(tp[rng.permutation(tp.shape[0])], rest, x1, THICK)
+    bvf, bee = _box_pairs_brute_force(g, rest, x1, THICK)
+    assert bvf.shape[0] > 1000 and bee.shape[0] > 1000
+    assert (vf[:, 0] >= model.num_vertices).any()       # collider vertices against cloth faces
+    assert np.array_equal(vf, bvf)
+    assert np.array_equal(ee, bee)

@@ -145,7 +145,9 @@ def test_effects_that_are_off_build_nothing():
     assert sim.contact.detector is None             # no BVH, no all-gather, no traversal
     on = make_sim(grid_scene(effects=["gravity", "membrane", "self_collision"]))
     on.step()
-    assert on.contact.detector.counters["phases"] >= 2
+    # self-collision on: a traversal ran (proximity and the first CCD pass share one)
+    assert on.contact.detector.counters["phases"] >= 1
+    assert on.contact.detector.counters["tri_pairs"] > 0
     assert "collision:bodies" not in on.pipeline.stages   # no collider: no body stage
 
 

@@ -237,6 +237,17 @@ def test_deforming_collider_and_cache(torso):
     assert prox.n_refits == 2
     _, _, vel_end = prox.query(pts, 0.7)
     assert (vel_end == 0).all()
+    back = prox.query(pts, t)                      # a step's start again: kept, not refit
+    assert prox.n_refits == 2
+    for a, b in zip(back, (phi, normal, vel)):
+        np.testing.assert_array_equal(a, b)
+    for k, s in enumerate((0.1, 0.3, 0.4)):        # KEEP_TIMES = 3 times kept: the oldest goes
+        prox.query(pts, s)
+        assert prox.n_refits == 3 + k
+    again = prox.query(pts, t)                     # pushed out: refit, the same answer
+    assert prox.n_refits == 6
+    for a, b in zip(again, (phi, normal, vel)):
+        np.testing.assert_array_equal(a, b)
     static = MeshProximity(torso)
     static.query(pts, 0.0)
     static.query(pts, 3.0)

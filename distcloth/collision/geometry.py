@@ -58,6 +58,12 @@ class CollisionGeometry:
         self.tri = np.ascontiguousarray(np.concatenate(tris))
         self.edges = mesh_edges(self.tri)
         self.tri_edges = _triangle_edges(self.tri, self.edges)
+        # one incident triangle per vertex and per edge (the lowest id): a primitive's box
+        # lies inside each of its triangles' boxes, so every primitive pair whose boxes
+        # overlap comes with the pair of its owner triangles, and emitting it from that
+        # pair alone yields each candidate once instead of once per incident triangle pair
+        self.vertex_owner = _first_triangle(self.tri.reshape(-1), self.n_vertices)
+        self.edge_owner = _first_triangle(self.tri_edges.reshape(-1), self.edges.shape[0])
         self.kinematic = np.zeros(self.n_vertices, dtype=bool)
         self.kinematic[self.n_cloth:] = True
         self.n_colliders = len(self.object_tris) - self.n_ranks
@@ -76,22 +82,25 @@ class CollisionGeometry:
         self._trees = [build_bvh(self.tri[ids], x, leaf_size=self.leaf_size)
                        for ids in self.object_tris]
 
-    def trees(self, x0, x1=None, pad: float = 0.0) -> list[BVH]:
-        """Every object's tree refitted to the boxes swept over x0 -> x1, grown by pad."""
+    def trees(self, x0, x1=None, pad: float = 0.0, cloth_only: bool = False) -> list[BVH]:
+        """Every object's tree refitted to the boxes swept over x0 -> x1, grown
+        by pad (``cloth_only``: the cloth objects' only; the colliders' keep
+        their last boxes and must not be tested)."""
         if self._trees is None:
             self.build(x0)
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         x1 = x0 if x1 is None else np.ascontiguousarray(x1, dtype=np.float64)
-        for ids, t in zip(self.object_tris, self._trees):
+        objects = self.n_ranks if cloth_only else self.n_objects
+        for ids, t in zip(self.object_tris[:objects], self._trees[:objects]):
             if ids.size:
                 refit(t, self.tri[ids], x0, x1, pad)
         return self._trees
 
-    def root_tests(self, trees, self_collision: bool) -> np.ndarray:
+    def root_tests(self, trees, self_collision: bool, cloth_only: bool = False) -> np.ndarray:
         """Top-level tasks (obj1, 0, obj2, 0) whose root boxes overlap, in a
         fixed order: each rank's self test and the cross tests between ranks
         (only with self-collision), then each rank's sub-mesh against each
-        collider.  ``combine_roots`` builds the top of the replicated tree;
+        collider (not with ``cloth_only``).  ``combine_roots`` builds the top of the replicated tree;
         the overlap of its leaves decides which pairs are tasks."""
         P = self.n_ranks
         lo = np.array([t.lo[0] if t.n_nodes else np.full(3, np.inf) for t in trees])
@@ -100,7 +109,7 @@ class CollisionGeometry:
         tests = []
         for a in range(self.n_objects):
             for b in range(a, self.n_objects):
-                if b >= P and a >= P:
+                if b >= P and (a >= P or cloth_only):
                     continue                         # collider against collider: never
                 if b < P and not self_collision:
                     continue                         # cloth against cloth: self-collision only
@@ -140,15 +149,17 @@ class CollisionGeometry:
         """Vertex-face (vertex, face) and edge-edge (edge a < edge b) pairs of
         the triangle pairs whose swept boxes (grown by pad) overlap, sorted
         unique; pairs sharing a vertex and pairs of kinematic primitives only
-        are left out."""
+        are left out.  ``tri_pairs`` must hold every triangle pair whose
+        boxes overlap (each once, in either order): a primitive pair is
+        taken from the pair of its primitives' owner triangles only."""
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         x1 = x0 if x1 is None else np.ascontiguousarray(x1, dtype=np.float64)
         tp = np.ascontiguousarray(tri_pairs, dtype=np.int64).reshape(-1, 2)
         k = tp.shape[0]
         vf = np.empty((6 * k, 2), np.int64)
         ee = np.empty((9 * k, 2), np.int64)
-        nvf, nee = _expand(tp, self.tri, self.tri_edges, self.edges, self.kinematic, x0, x1,
-                           float(pad), vf, ee)
+        nvf, nee = _expand(tp, self.tri, self.tri_edges, self.edges, self.kinematic,
+                           self.vertex_owner, self.edge_owner, x0, x1, float(pad), vf, ee)
         return unique_rows(vf[:nvf]), unique_rows(ee[:nee])
 
 
@@ -162,6 +173,16 @@ def _triangle_edges(tri, edges) -> np.ndarray:
         b = np.maximum(tri[:, i], tri[:, j])
         out[:, s] = np.searchsorted(key, a * n + b)
     return out
+
+
+def _first_triangle(corner_ids: np.ndarray, n: int) -> np.ndarray:
+    """(n,) the lowest triangle id whose three entries of ``corner_ids``
+    (triangle-major, 3 per triangle) hold each id; -1 for ids in none."""
+    none = np.iinfo(np.int64).max
+    owner = np.full(n, none, dtype=np.int64)
+    np.minimum.at(owner, corner_ids, np.repeat(np.arange(corner_ids.size // 3, dtype=np.int64), 3))
+    owner[owner == none] = -1
+    return owner
 
 
 @njit(cache=True)
@@ -183,7 +204,8 @@ def _box_overlap(ids1, ids2, x0, x1, pad):
 
 
 @njit(cache=True)
-def _expand(tp, tri, tri_edges, edges, kinematic, x0, x1, pad, vf, ee):
+def _expand(tp, tri, tri_edges, edges, kinematic, vertex_owner, edge_owner, x0, x1, pad,
+            vf, ee):
     nvf = 0
     nee = 0
     one = np.empty(1, np.int64)
@@ -194,6 +216,8 @@ def _expand(tp, tri, tri_edges, edges, kinematic, x0, x1, pad, vf, ee):
             fb = tri[tb]
             for i in range(3):
                 v = tri[ta, i]
+                if vertex_owner[v] != ta:
+                    continue
                 if v == fb[0] or v == fb[1] or v == fb[2]:
                     continue
                 if kinematic[v] and kinematic[fb[0]] and kinematic[fb[1]] and kinematic[fb[2]]:
@@ -205,8 +229,12 @@ def _expand(tp, tri, tri_edges, edges, kinematic, x0, x1, pad, vf, ee):
                     nvf += 1
         for i in range(3):
             ea = tri_edges[tp[k, 0], i]
+            if edge_owner[ea] != tp[k, 0]:
+                continue
             for j in range(3):
                 eb = tri_edges[tp[k, 1], j]
+                if edge_owner[eb] != tp[k, 1]:
+                    continue
                 a0 = edges[ea, 0]
                 a1 = edges[ea, 1]
                 b0 = edges[eb, 0]

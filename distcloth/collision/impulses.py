@@ -442,15 +442,15 @@ def impact_zones(x0, u, h, inv_mass, tri, edges, thickness, candidates, max_iter
 
 class ReusedCandidates:
     """``candidates(x0, x1)`` for the passes of one :func:`resolve`, found
-    once with the boxes grown by ``slack`` more and reused while no vertex's
-    end position has moved more than ``slack`` (per coordinate) from the one
-    they were found for.
+    once with the boxes grown by ``slack`` more and reused while every
+    vertex's end position stays within the box of its old path (x0 to the
+    end position they were found for) grown by ``slack`` per coordinate.
 
-    Conservative: a point of the new path x0 + s (x1' - x0), s in [0, 1], is
-    within s |x1' - x1| <= slack of the old one, so every pair whose swept
-    boxes (grown by the pad) overlap on the new paths is among the pairs
-    found with the pad + slack on the old ones; the narrow phase is exact,
-    so the extra pairs change nothing.  On a pile-up (EG07 tutorial, Part 1 Fig. 19) the
+    Conservative: the new path's box, grown by the pad, then lies inside the
+    old one's grown by pad + slack, so every pair whose swept boxes (grown
+    by the pad) overlap on the new paths is among the pairs found; the
+    narrow phase is exact, so the extra pairs change nothing.  A query at
+    rest (x1 = x0: proximity) is always inside.  On a pile-up (EG07 tutorial, Part 1 Fig. 19) the
     CCD and impact-zone passes move few vertices by little, and a whole
     traversal per pass was 39 traversals per step.  The decision uses the
     replicated arrays only, so every rank makes it alike (the detection is
@@ -468,7 +468,8 @@ class ReusedCandidates:
         if self._key is not None:
             k0, k1 = self._key
             if (k0.shape == x0.shape and np.array_equal(k0, x0)
-                    and np.max(np.abs(x1 - k1), initial=0.0) <= self.slack):
+                    and np.all(x1 >= np.minimum(x0, k1) - self.slack)
+                    and np.all(x1 <= np.maximum(x0, k1) + self.slack)):
                 return self._pairs
         self._pairs = self.detect(x0, x1, self.pad + self.slack)
         self._key = (x0.copy(), x1.copy())
@@ -515,7 +516,11 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
     the zone iteration cap was hit)."""
     x0, u, inv_mass, tri, edges = _prep(x0, u, inv_mass, tri, edges)
     eta = 1e-3 * thickness if eta is None else eta
-    vf, ee = clean_pairs(*candidates(x0, x0), tri, edges, inv_mass, same)
+    # the proximity pairs from the candidates of the unresolved step's paths: a superset
+    # of those at x0 (each swept box holds its box at x0; the contact kernels measure the
+    # distance at x0), so the first CCD pass can reuse them (ReusedCandidates)
+    raw = candidates(x0, x0 + h * u)
+    vf, ee = clean_pairs(*raw, tri, edges, inv_mass, same)
     pvf = vertex_face_contacts(x0, tri, vf, thickness)
     pee = edge_edge_contacts(x0, edges, ee, thickness)
     u = repulsion(x0, u, h, inv_mass, tri, edges, pvf, pee, thickness, friction,
@@ -524,7 +529,9 @@ def resolve(x0, u, h, inv_mass, tri, edges, thickness, friction, candidates,
              "zones": 0, "zone_vertices": 0, "zone_iterations": 0, "remaining": 0}
     n_hits = 1
     for _ in range(max_ccd_iterations):
-        vf, ee = clean_pairs(*candidates(x0, x0 + h * u), tri, edges, inv_mass, same)
+        raw_prev, raw = raw, candidates(x0, x0 + h * u)
+        if raw is not raw_prev:          # reused candidates (ReusedCandidates) are clean already
+            vf, ee = clean_pairs(*raw, tri, edges, inv_mass, same)
         u, n_hits = ccd_impulses(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, eta, margin,
                                  sweeps, hits, keep, priority)
         stats["ccd_hits"].append(n_hits)

@@ -160,9 +160,14 @@ class MeshProximity:
     ``closed`` tells whether the mesh is watertight and consistently
     oriented (then phi is signed; an inward oriented mesh, negative volume,
     is flipped); otherwise phi is the unsigned distance.  Geometry is cached
-    per t: repeated queries at the same t do not refit; a static mesh
-    without motion is never refit.  ``n_refits`` counts the refits.
+    per t for the last ``KEEP_TIMES`` times: a step asks at its start and
+    its end in turn (detection, then the solve's revision and the
+    response), and going back to a kept time neither refits nor recomputes
+    normals or velocities; a static mesh without motion is never refit.
+    ``n_refits`` counts the refits.
     """
+
+    KEEP_TIMES = 3           # the current time included
 
     def __init__(self, collider: MeshCollider, leaf_size: int = 4):
         self.collider = collider
@@ -185,6 +190,7 @@ class MeshProximity:
         self._x = x0
         self._v = None
         self._fn = self._vn = None
+        self._kept: dict = {}      # t -> the geometry at t other than the current
 
     # -------------------------------------------------------------- geometry at t
     friction = property(lambda self: self.collider.friction)
@@ -194,11 +200,22 @@ class MeshProximity:
         t = float(t)
         if self._static or t == self._t:
             return
-        self._x = np.ascontiguousarray(self.collider.vertices(t))
-        refit(self._bvh, self.triangles, self._x)
-        self.n_refits += 1
+        b = self._bvh
+        self._kept[self._t] = (self._x, self._v, self._fn, self._vn, b.lo, b.hi, b.plo, b.phi)
+        kept = self._kept.pop(t, None)
+        if kept is None:
+            if len(self._kept) >= self.KEEP_TIMES:      # the oldest time's boxes are reused
+                boxes = self._kept.pop(next(iter(self._kept)))[4:]
+            else:
+                boxes = tuple(a.copy() for a in (b.lo, b.hi, b.plo, b.phi))
+            b.lo, b.hi, b.plo, b.phi = boxes
+            self._x = np.ascontiguousarray(self.collider.vertices(t))
+            refit(b, self.triangles, self._x)
+            self.n_refits += 1
+            self._v = self._fn = self._vn = None
+        else:
+            self._x, self._v, self._fn, self._vn, b.lo, b.hi, b.plo, b.phi = kept
         self._t = t
-        self._v = self._fn = self._vn = None
 
     def vertices(self, t: float = 0.0) -> np.ndarray:
         self._update(t)

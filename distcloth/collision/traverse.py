@@ -266,10 +266,27 @@ def run_tests(trees, tests, chunk: int = 1 << 16) -> np.ndarray:
 
 
 def unique_rows(a: np.ndarray) -> np.ndarray:
-    """Sorted unique rows of a 2D integer array (np.unique(axis=0) sorts a
-    structured view and is ~10x slower on millions of rows)."""
+    """Sorted unique rows of a 2D non-negative integer array.  Rows whose
+    columns pack into one int64 key (column j times the product of the
+    later columns' ranges) are sorted as keys (unless they already are): one 1D sort instead of a
+    lexsort over the columns (np.unique(axis=0), which sorts a structured
+    view, is ~10x slower still on millions of rows).  The order is the
+    same: lexicographic, first column first."""
     if a.shape[0] == 0:
         return a
+    a = np.asarray(a)
+    span = a.max(axis=0).astype(np.int64) + 1
+    if a.min() >= 0 and float(np.prod(span.astype(np.float64))) < 2.0 ** 62:
+        scale = np.ones(a.shape[1], dtype=np.int64)
+        for j in range(a.shape[1] - 2, -1, -1):
+            scale[j] = scale[j + 1] * span[j + 1]
+        key = a.astype(np.int64) @ scale
+        if not np.all(key[1:] > key[:-1]):      # already sorted unique: an O(n) check
+            key = np.unique(key)
+        out = np.empty((key.size, a.shape[1]), dtype=a.dtype)
+        for j in range(a.shape[1]):
+            out[:, j], key = np.divmod(key, scale[j])
+        return out
     a = a[np.lexsort(a.T[::-1])]
     keep = np.ones(a.shape[0], np.bool_)
     keep[1:] = np.any(a[1:] != a[:-1], axis=1)

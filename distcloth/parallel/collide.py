@@ -114,14 +114,17 @@ class DistributedCollisions:
         return flat.reshape(-1, k)
 
     # ----------------------------------------------------------- detection
-    def my_triangle_pairs(self, x0, x1=None, pad: float = 0.0) -> np.ndarray:
+    def my_triangle_pairs(self, x0, x1=None, pad: float = 0.0,
+                          cloth_only: bool = False) -> np.ndarray:
         """Triangle pairs (global ids) whose boxes overlap, found on this
         rank: the union over the ranks is every overlapping pair, each on one
-        rank.  Collective with ``stealing`` (the ranks exchange tasks); without
-        it each rank runs its statically assigned top-level tasks alone."""
+        rank (``cloth_only``: cloth triangle pairs only, the colliders neither
+        refitted nor traversed).  Collective with ``stealing`` (the ranks
+        exchange tasks); without it each rank runs its statically assigned
+        top-level tasks alone."""
         g = self.geometry
-        trees = g.trees(x0, x1, pad)
-        tests = g.root_tests(trees, self.self_collision)
+        trees = g.trees(x0, x1, pad, cloth_only)
+        tests = g.root_tests(trees, self.self_collision, cloth_only)
         owner = g.static_owner(tests) if tests.size else np.zeros(0, np.int64)
         rows, stats = run_tasks(self.comm, trees, tests, owner, stealing=self.stealing,
                                 a=self.a, b=self.b, chunk=self.chunk, **self.steal_options)
@@ -195,7 +198,7 @@ class DistributedCollisions:
         the pairs whose boxes overlap, pairs coplanar to 1e-9 of an edge by
         the 2D test; pairs sharing a vertex are not counted), summed over the
         tasks of all ranks."""
-        tp = self.my_triangle_pairs(x, x, 0.0)
+        tp = self.my_triangle_pairs(x, x, 0.0, cloth_only=True)
         g = self.geometry
         if tp.shape[0]:
             a, b = g.tri[tp[:, 0]], g.tri[tp[:, 1]]

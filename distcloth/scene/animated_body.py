@@ -2,6 +2,8 @@
 mesh rigged and driven by the motion capture file (docs/bodies.md)."""
 from __future__ import annotations
 
+import os
+
 from ..body.animated import AnimatedBody
 from ..body.bvh import read_bvh
 from ..body.clip import Timeline
@@ -10,6 +12,19 @@ from ..body.retarget import MappingError
 from ..collision.colliders import (MeshFrameError, RigidMotion, SkinnedMeshCollider,
                                    collider_file_error, placement_map, read_mesh_frames)
 from ..config.schema import ConfigError
+
+
+# the last rigged body of this process: a garment scene builds its body twice (for the
+# sewing and for the run), and rigging it (skeleton, bone heat, limb clearances) takes
+# seconds; an AnimatedBody holds nothing a simulation changes but its pose caches
+_RIGGED: dict = {}
+
+
+def _mtime(path) -> int:
+    try:
+        return os.stat(path).st_mtime_ns
+    except OSError:
+        return -1
 
 
 def load_animated_collider(spec, key: str, motion: RigidMotion | None = None) -> SkinnedMeshCollider:
@@ -36,11 +51,16 @@ def load_animated_collider(spec, key: str, motion: RigidMotion | None = None) ->
         (vertices, triangles), = read_mesh_frames(spec.files)
     except MeshFrameError as exc:
         raise collider_file_error(spec, key, exc) from None
+    key_rig = (anim, spec.files[0], _mtime(spec.files[0]), _mtime(anim.motion))
     try:
-        body = AnimatedBody(vertices, triangles, clip, timeline, method=anim.skinning,
-                            root_motion=anim.root_motion, mapping=dict(anim.joints),
-                            arm_clearance=anim.arm_clearance,
-                            leg_clearance=anim.leg_clearance)
+        body = _RIGGED.get(key_rig)
+        if body is None:
+            body = AnimatedBody(vertices, triangles, clip, timeline, method=anim.skinning,
+                                root_motion=anim.root_motion, mapping=dict(anim.joints),
+                                arm_clearance=anim.arm_clearance,
+                                leg_clearance=anim.leg_clearance)
+            _RIGGED.clear()
+            _RIGGED[key_rig] = body
     except MappingError as exc:     # a body joint the capture has no joint for
         raise ConfigError(f"{key}.animation.joints", dict(anim.joints),
                           f"capture joints of {anim.motion} ({exc})") from None
