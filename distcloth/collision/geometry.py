@@ -100,8 +100,9 @@ class CollisionGeometry:
         """Top-level tasks (obj1, 0, obj2, 0) whose root boxes overlap, in a
         fixed order: each rank's self test and the cross tests between ranks
         (only with self-collision), then each rank's sub-mesh against each
-        collider (not with ``cloth_only``).  ``combine_roots`` builds the top of the replicated tree;
-        the overlap of its leaves decides which pairs are tasks."""
+        collider (not with ``cloth_only``).  ``combine_roots`` builds the top
+        of the replicated tree; the overlap of its leaves decides which pairs
+        are tasks."""
         P = self.n_ranks
         lo = np.array([t.lo[0] if t.n_nodes else np.full(3, np.inf) for t in trees])
         hi = np.array([t.hi[0] if t.n_nodes else np.full(3, -np.inf) for t in trees])

@@ -450,9 +450,10 @@ class ReusedCandidates:
     old one's grown by pad + slack, so every pair whose swept boxes (grown
     by the pad) overlap on the new paths is among the pairs found; the
     narrow phase is exact, so the extra pairs change nothing.  A query at
-    rest (x1 = x0: proximity) is always inside.  On a pile-up (EG07 tutorial, Part 1 Fig. 19) the
-    CCD and impact-zone passes move few vertices by little, and a whole
-    traversal per pass was 39 traversals per step.  The decision uses the
+    rest (x1 = x0: proximity) is always inside.  On a pile-up (EG07
+    tutorial, Part 1 Fig. 19) the CCD and impact-zone passes move few
+    vertices by little, and a whole traversal per pass was 39 traversals
+    per step.  The decision uses the
     replicated arrays only, so every rank makes it alike (the detection is
     collective)."""
 

@@ -266,12 +266,12 @@ def run_tests(trees, tests, chunk: int = 1 << 16) -> np.ndarray:
 
 
 def unique_rows(a: np.ndarray) -> np.ndarray:
-    """Sorted unique rows of a 2D non-negative integer array.  Rows whose
-    columns pack into one int64 key (column j times the product of the
-    later columns' ranges) are sorted as keys (unless they already are): one 1D sort instead of a
-    lexsort over the columns (np.unique(axis=0), which sorts a structured
-    view, is ~10x slower still on millions of rows).  The order is the
-    same: lexicographic, first column first."""
+    """Sorted unique rows of a 2D integer array, lexicographic (first
+    column first).  Non-negative rows whose columns pack into one int64 key
+    (column j times the product of the later columns' ranges) are sorted as
+    keys, unless they already are: one 1D sort instead of a lexsort over
+    the columns (np.unique(axis=0), which sorts a structured view, is ~10x
+    slower still on millions of rows)."""
     if a.shape[0] == 0:
         return a
     a = np.asarray(a)
