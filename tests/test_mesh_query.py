@@ -254,6 +254,26 @@ def test_deforming_collider_and_cache(torso):
     assert static.n_refits == 0
 
 
+def test_a_static_mesh_moved_answers_as_one_built_there(torso):
+    # move_to refits the tree built for the first pose: the closest points
+    # and signed distances at the second pose are bitwise those of a mesh
+    # built there (the tree's shape differs, the distances are exact minima)
+    x0, tri = torso.vertices(0.0), torso.triangles
+    centre = x0.mean(axis=0)
+    x1 = centre + (x0 - centre) * np.array([1.05, 0.95, 1.1]) + 0.002 * np.sin(30 * x0)
+    rng = np.random.default_rng(9)
+    pts = x1[rng.integers(0, x1.shape[0], 800)] + rng.normal(scale=0.02, size=(800, 3))
+    moved = MeshProximity(MeshCollider.static(x0, tri))
+    moved.query(pts)
+    moved.move_to(x1)
+    built = MeshProximity(MeshCollider.static(x1, tri))
+    for a, b in zip(moved.query(pts), built.query(pts)):
+        np.testing.assert_array_equal(a, b)
+    assert moved.n_refits == 1
+    with pytest.raises(ValueError):
+        MeshProximity(MeshCollider.sequence([x0, x1], tri, [0.0, 1.0])).move_to(x0)
+
+
 # ---------------------------------------------------------------- open panel
 
 def test_open_panel_is_two_sided():

@@ -30,10 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..collision.colliders import MeshCollider
 from ..collision.mesh_query import MeshProximity
 from .limb_clearance import (FORWARD, SIDES, LimbSpread, axis_rotations, least_angle,
-                             limb_chain, solve_grid, solve_passes, turn_out)
+                             limb_chain, posed_mesh, solve_grid, solve_passes, turn_out)
 from .skeleton import Skeleton
 
 JUNCTION = 0.08          # m down the upper arm from the shoulder joint: below the armpit
@@ -91,8 +90,10 @@ def solve(skeleton: Skeleton, rest_vertices: np.ndarray, triangles: np.ndarray,
     n_chest = len(chest_ids)
     shoulders = [skeleton.index(f"{side}_shoulder") for side, _ in SIDES]
 
+    chest_at = posed_mesh(chest_tri)
+
     def frame_angles(rot, joints, skinned):
-        chest = MeshProximity(MeshCollider.static(skinned[:n_chest], chest_tri))
+        chest = chest_at(skinned[:n_chest])
         forward = rot[skeleton.index("chest")] @ FORWARD
         arm_points = np.split(skinned[n_chest:], [len(arms[0])])
         return [_clear_angle(pts, joints[j], sign * forward, chest, clearance)

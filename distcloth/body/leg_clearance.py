@@ -29,9 +29,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..collision.colliders import MeshCollider
 from ..collision.mesh_query import MeshProximity
-from .limb_clearance import (FORWARD, LimbSpread, axis_rotations, least_angle,
+from .limb_clearance import (FORWARD, LimbSpread, axis_rotations, least_angle, posed_mesh,
                              solve_grid, solve_passes, turn_out)
 from .skeleton import Skeleton
 
@@ -86,8 +85,10 @@ def solve(skeleton: Skeleton, triangles: np.ndarray, dominant: np.ndarray, skin_
     hips = [skeleton.index("l_hip"), skeleton.index("r_hip")]
     pelvis = skeleton.index("pelvis")
 
+    right_at = posed_mesh(right_tri)
+
     def frame_angles(rot, joints, skinned):
-        right = MeshProximity(MeshCollider.static(skinned[len(left):], right_tri))
+        right = right_at(skinned[len(left):])
         delta = _clear_angle(skinned[:len(left)], joints[hips], rot[pelvis] @ FORWARD, right,
                              clearance)
         return [delta, delta]

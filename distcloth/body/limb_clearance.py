@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..collision.colliders import MeshCollider
+from ..collision.mesh_query import MeshProximity
 from .skeleton import Skeleton
 
 FORWARD = np.array([0.0, 0.0, 1.0])   # the body's front at rest (mesh frame: y up, front +z)
@@ -15,6 +17,22 @@ SIDES = (("l", 1.0), ("r", -1.0))     # the left limbs are at +x: turning about 
 GRID = 1.0 / 60.0        # s between the times the angles are solved at
 WINDOW = 0.05            # s: the smoothing's half width
 BISECTIONS = 14          # 35° / 2^14: 0.002°, 0.01 mm at the elbow
+
+
+def posed_mesh(triangles: np.ndarray):
+    """``at(vertices)``: the closest-point queries of ``triangles`` at those
+    vertices, one pose after another; the tree and the edge adjacency are
+    built on the first call and refit on the later ones (a search visits
+    hundreds of poses of the same skin)."""
+    held: list[MeshProximity] = []
+
+    def at(vertices) -> MeshProximity:
+        if held:
+            held[0].move_to(vertices)
+        else:
+            held.append(MeshProximity(MeshCollider.static(vertices, triangles)))
+        return held[0]
+    return at
 
 
 def axis_rotations(axes: np.ndarray, angles: np.ndarray) -> np.ndarray:

@@ -221,6 +221,17 @@ class MeshProximity:
         self._update(t)
         return self._x
 
+    def move_to(self, vertices) -> None:
+        """A static mesh's vertices moved (the same triangles, the same
+        orientation): its tree is refit, not rebuilt, and its edge adjacency
+        kept, for callers that query one mesh in many poses."""
+        if not self._static:
+            raise ValueError("MeshProximity.move_to: the mesh moves by itself")
+        self._x = np.ascontiguousarray(vertices, dtype=np.float64).reshape(self._x.shape)
+        refit(self._bvh, self.triangles, self._x)
+        self.n_refits += 1
+        self._v = self._fn = self._vn = None
+
     def _velocities(self) -> np.ndarray:
         if self._v is None:
             self._v = self.collider.velocities(self._t)
