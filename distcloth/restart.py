@@ -72,6 +72,7 @@ def capture(sim, weld=None) -> tuple[dict, dict]:
         arrays["contact_collider"] = arrays["contact_collider"][:, 0].astype(np.int64)
     scalars = {"time": float(state.t), "step": int(state.step), "rejections": int(state.rejections),
                "newton_unconverged": int(state.newton_unconverged),
+               "contact_changes": int(state.contact_changes),
                "limiter_unconverged_steps": int(sim.limiter_unconverged_steps)}
     if state.history is not None:
         scalars["history_h"] = float(state.history.h)
@@ -95,6 +96,7 @@ def restore_state(sim, scalars: dict, arrays: dict) -> None:
     state.t, state.step = float(scalars["time"]), int(scalars["step"])
     state.rejections = int(scalars["rejections"])
     state.newton_unconverged = int(scalars["newton_unconverged"])
+    state.contact_changes = int(scalars.get("contact_changes", 0))
     sim.limiter_unconverged_steps = int(scalars.get("limiter_unconverged_steps", 0))
     state.acceleration = arrays["acceleration"][local].copy() if "acceleration" in arrays else None
     state.history = None

@@ -10,6 +10,7 @@ step with the same message.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 
@@ -337,6 +338,10 @@ class Simulation:
             info.reaction = constraint_impulses(self.pattern, data, rhs, dv)
         return y, info
 
+    def _tolerance(self, rtol):
+        """The linear solves' relative tolerance loosened to ``rtol`` (None: the scene's)."""
+        return contextlib.nullcontext() if self.system is None else self.system.loosened(rtol)
+
     def _update(self, result):
         n = self.n_owned
         state = self.state
@@ -517,16 +522,31 @@ class Simulation:
         state, pipe, contact = self.state, self.pipeline, self.contact
         target = pipe.run("kinematics", t_end, h)
         revision, contacts, result = None, None, None
-        for _ in range(MAX_CONTACT_PASSES if contact.has_bodies else 1):
-            if contact.has_bodies:
+        # while the contact set changes, a pass only has to show which contacts
+        # hold: it solves to contact.pass_rtol; once a loose solve leaves the set
+        # unchanged, the same contacts are solved again to the scene's tolerance
+        # (from the loose answer) and that solve is revised like any other.
+        # Only after a step whose contact set changed: where one solve settles
+        # the set, a loose one first would only add a solve
+        loose = contact.pass_rtol if contact.has_bodies and self.system is not None else None
+        if loose is not None and (self.system.rtol >= loose or state.contact_changes == 0):
+            loose = None
+        changes, iterations = 0, 0
+        passes = (MAX_CONTACT_PASSES + (loose is not None)) if contact.has_bodies else 1
+        detect = True
+        for k in range(passes):
+            if contact.has_bodies and detect:
                 contacts = pipe.run("collision:bodies", state, h, revision)
                 contact.begin_attempt(contacts, h)
             cons = pipe.run("constraints", target, contacts)
+            rtol = loose if k < passes - 1 else None
             error, solver_failure = None, False
             try:
                 # a re-solve starts from the last solve's velocity change
                 guess = None if result is None else result.v - state.v[: self.n_owned]
-                result = self.integrator.step(self.ctx, state, h, cons, guess)
+                with self._tolerance(rtol):
+                    result = self.integrator.step(self.ctx, state, h, cons, guess)
+                iterations += result.ksp_iterations
             except SolverFailure as exc:      # the same on every rank
                 error, solver_failure = f"SolverFailure: {exc}", True
             except Exception as exc:          # a local bug is not: agree on it
@@ -539,11 +559,16 @@ class Simulation:
                 break
             # an adhesive contact, or a vertex the prediction missed that ends the
             # step inside a body: solve the step again with the revised contacts
-            revision = contact.revise(contacts, result, state.t + h, h, revision)
-            if revision is None:
+            revised = contact.revise(contacts, result, state.t + h, h, revision)
+            if revised is None and rtol is None:
                 break
+            if revised is None:
+                loose, detect = None, False
+            else:
+                revision, detect, changes = revised, True, changes + 1
             if self.system is not None:      # the re-solve's matrix is nearly the same
                 self.system.keep_preconditioner()
+        result.ksp_iterations = iterations        # every pass's
         self.held.hold(result.v, t_end)
         result.contact_report, result.touching, result.limit_report = None, None, None
         if self.limiter is not None:
@@ -572,6 +597,7 @@ class Simulation:
         if reason:
             state.restore(saved)
             return None, reason, False
+        state.contact_changes = changes
         self._commit(result, contacts, t_end, (state.v - saved.v) / h)
         return result, None, False
 

@@ -13,8 +13,10 @@ A step of size h from the committed state (x, v) at time t:
 * ``kinematics`` .. ``constraints`` set up the attempt;
 * the force stages, ``assembly`` and ``solve`` run inside the integrator,
   as often as it needs them (once per Newton iteration, four times per RK4
-  step); with body contacts the attempt is solved again, at most three times,
-  when a free vertex ends up inside a body;
+  step); with body contacts the attempt is solved again while the contact
+  set changes (a contact turned adhesive, a free vertex ended inside a
+  body), at most four passes, loosely until the set settles and then once
+  more at the scene's tolerance;
 * ``strain_limiting``, ``collision:response`` and ``update`` finish the attempt; the state is
   then checked (NaN, speed, strain, energy) and committed or restored;
 * ``diagnostics`` and ``output`` report the committed step.

@@ -41,6 +41,7 @@ class State:
     energy_reference: tuple[float, float] | None = None
     rejections: int = 0                  # attempts undone so far (adaptive halving)
     newton_unconverged: int = 0          # accepted steps whose Newton loop ran out
+    contact_changes: int = 0             # re-solves the last step's contact set needed
 
     def snapshot(self) -> "State":
         """A copy to restore if the step is rejected (the history, contacts and
@@ -55,7 +56,7 @@ class State:
         self.v[...] = saved.v
         for name in ("t", "step", "history", "contacts", "touching", "acceleration",
                      "energy_reference",
-                     "rejections", "newton_unconverged"):
+                     "rejections", "newton_unconverged", "contact_changes"):
             setattr(self, name, getattr(saved, name))
 
     def clear_history(self) -> None:

@@ -60,6 +60,8 @@ from .sagitta import body_clearance
 from .response import Contacts, contact_constraint, detect, friction, normal_impulse, project
 
 MAX_CONTACT_PASSES = 4   # solves per attempt at most while the contact set changes
+CONTACT_PASS_RTOL = 1e-3  # relative residual of the solves that only settle the contact set
+                          # (the last is solved again to the scene's tolerance)
 MISSED_FRACTION = 0.05   # a free vertex ending deeper than this fraction of d is a missed contact
 BAND_FRACTION = 0.5      # a vertex that ended the last step within this fraction of d above d
                          # and is predicted to end this one there too is a contact, held at
@@ -224,6 +226,7 @@ class ContactModel:
         self.sticking = None     # a static relaxation's sticking contacts (stick)
         # a drape lowers it below its residual tolerance: a contact's pull is unbalanced force
         self.adhesion_tolerance = ADHESION_TOLERANCE
+        self.pass_rtol = CONTACT_PASS_RTOL     # None: every pass to the scene's tolerance
         self.gravity = np.asarray(cfg.gravity if cfg.has("gravity") else (0.0, 0.0, 0.0), float)
         self.gravity_norm = float(np.linalg.norm(self.gravity))
         # friction as a force of the solve: the colliders whose law says so

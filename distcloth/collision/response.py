@@ -24,7 +24,7 @@ body stays where it is.  After the solve the contact model (``revise``)
 releases every contact whose constraint impulse turned adhesive (the
 constraint held the vertex against a pull away from the body) and makes a
 contact of every free vertex that ended deeper than 5 % of d inside, and the
-step is solved again (at most four solves): what is left is a set in which
+step is solved again (at most four passes, contact.py): what is left is a set in which
 every constraint pushes.  A landing constraint slows an approaching vertex
 (negative work), a kept one does no work at rest; positive work is done only
 in pushing a penetrating vertex out, by at most its depth, and the works are

@@ -31,7 +31,7 @@ class StepResult:
     # with body contacts; linalg/assembly.constraint_impulses), else None
     reaction: np.ndarray | None = None
     newton_iterations: int = 0
-    ksp_iterations: int = 0       # summed over the step's solves
+    ksp_iterations: int = 0       # summed over the step's solves (and contact passes)
     ksp_residual: float = 0.0     # largest true relative residual of the step's solves
     newton_residual: float = 0.0  # final relative Newton residual (0 for explicit steps)
     newton_converged: bool = True # False: the Newton loop used every iteration above tolerance

@@ -13,6 +13,7 @@ omega = 1, so the sub-preconditioner is symmetric Gauss-Seidel.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import ctypes
@@ -120,6 +121,24 @@ class LinearSystem:
         nothing, so only AMG preconditioners are kept."""
         self._reuse_next = self.ksp.getPC().getType() in ("gamg", "hypre", "ml")
 
+    @property
+    def rtol(self) -> float:
+        return self.ksp.getTolerances()[0]
+
+    @contextmanager
+    def loosened(self, rtol: float | None):
+        """Solves inside use the relative tolerance ``rtol`` where it is looser
+        than the configured one (None: unchanged); restored on exit."""
+        old = self.ksp.getTolerances()[0]
+        if rtol is None or rtol <= old:
+            yield
+            return
+        self.ksp.setTolerances(rtol=rtol)
+        try:
+            yield
+        finally:
+            self.ksp.setTolerances(rtol=old)
+
     def block_jacobi_blocks(self) -> int:
         """Local number of block-Jacobi blocks (0 if another preconditioner is in use)."""
         pc = self.ksp.getPC()
@@ -154,7 +173,11 @@ class LinearSystem:
             with logged("solve:guess"):
                 self.ksp.setInitialGuessNonzero(self._better_than_zero(guess))
         elif self.warm_start:
-            self.ksp.setInitialGuessNonzero(True)
+            # the last solution: a good start for the next step's velocity
+            # change, a poor one for a Newton correction (whose right-hand side
+            # is the small residual): checked like any guess
+            with logged("solve:guess"):
+                self.ksp.setInitialGuessNonzero(self._better_than_zero(self.y.array.copy()))
         else:
             self.y.set(0.0)
             self.ksp.setInitialGuessNonzero(False)
