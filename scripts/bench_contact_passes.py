@@ -9,7 +9,7 @@ and largest vertex distance), next to how far the tight mode lands from
 itself with the solver's tolerance tightened tenfold: the scale the contact
 set's sensitivity to the solver already allows.
 
-    scripts/mpiexec.sh 2 .venv/bin/python scripts/bench_contact_passes.py configs/bench/s2_81.yaml --end 1.0
+    scripts/mpiexec.sh 2 .venv/bin/python scripts/bench_contact_passes.py configs/bench/s2_81.yaml --end 0.8 --repeats 2
 """
 from __future__ import annotations
 

@@ -129,7 +129,7 @@ class LinearSystem:
     def loosened(self, rtol: float | None):
         """Solves inside use the relative tolerance ``rtol`` where it is looser
         than the configured one (None: unchanged); restored on exit."""
-        old = self.ksp.getTolerances()[0]
+        old = self.rtol
         if rtol is None or rtol <= old:
             yield
             return
