@@ -2,9 +2,10 @@
 format 3): each vertex's velocity and contact flag, each triangle's strain.
 
 * ``velocity`` (n, 3) m/s: the committed state's velocity.
-* ``contact`` (n,) int8: 1 where the vertex ended the step within the contact
-  band of a collider (the state's ``touching``, which the next step keeps as
-  contacts); 0 before the first step and in a scene without colliders.
+* ``contact`` (n,) int8: 1 where the step's contacts held the vertex, or the
+  fail-safe put it back, and it ended within the contact band of a collider
+  (the state's ``touching``, which the next step keeps as contacts); 0 before
+  the first step and in a scene without colliders.
 * ``strain`` (nt,) per triangle (Cell data in ParaView): the largest
   principal engineering strain, stretch - 1, from the triangle's rest shape
   (physics/strain_field.py).  Per triangle because that is what the FE

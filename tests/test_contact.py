@@ -273,3 +273,47 @@ def test_newton_iterations_start_from_a_checked_warm_start():
         sim.step()
     assert sim.state.step == 20
     sim.destroy()
+
+
+def test_a_step_keeps_only_the_contacts_it_held():
+    """The next step keeps as contacts the vertices this step's contacts
+    held or the fail-safe put back, not every vertex that ended in the
+    1.5 d band: cloth leaving the sphere tangentially stays in the band for
+    a few cells, and kept, those vertices were held still and released as
+    adhesive in every step.  The peer tablecloth at 31 x 31, 5 ms, steps
+    41-60 (draped, sliding), 2 ranks: 7.4 contacts released a step when
+    every banded vertex was kept, 2.3 now; 4.5 lies between with margin for
+    the partition's effect on the path.  Once landed (step 29, where BDF-2
+    gains 0.2 % of E0 with either rule) the energy only falls: the freed
+    vertices do no work on the cloth."""
+    raw = yaml.safe_load((ROOT / "configs" / "bench" / "s2_81.yaml").read_text())
+    raw["cloth"][0]["mesh"]["grid"]["resolution"] = [31, 31]
+    raw["time"].update(end=0.3)
+    raw["output"] = {"file": "unused.h5", "every": 1.0, "preview": False}
+    sim = make_sim(raw)
+    revise, released = sim.contact.revise, []
+
+    def counted(contacts, result, t_end, h, revision):
+        out = revise(contacts, result, t_end, h, revision)
+        if out is not None:
+            released[-1] = int(out.released[: sim.n_owned].sum())
+        return out
+    sim.contact.revise = counted
+    comm, energies = sim.comm, []
+    for step in range(60):
+        released.append(0)
+        diag = sim.step()
+        energies.append(diag["total_energy"])
+        n = sim.n_owned
+        kept = np.asarray(sim.state.touching)[:, :n]
+        held = np.zeros_like(kept)
+        c = sim.state.contacts
+        mine = c.index < n
+        held[c.collider[mine], c.index[mine]] = True
+        # every kept vertex was held, or put back by the fail-safe
+        extra = comm.sum(np.array([float(np.sum(kept & ~held))]))[0]
+        assert extra <= diag["projected_vertices"], (step, extra, diag["projected_vertices"])
+    per_step = comm.sum(np.array(released[40:], dtype=float)) / 20
+    sim.destroy()
+    assert per_step.sum() <= 4.5, per_step.sum()
+    assert max(np.diff(energies[30:])) <= 0.0, max(np.diff(energies[30:]))

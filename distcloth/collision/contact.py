@@ -487,7 +487,7 @@ class ContactModel:
                 self._failsafe(x_new, v_new, t_end)
             report.failsafe_work = self._work_of_change(x0, v0, x_new, v_new)
             flags = np.zeros((self.n_local, len(self.colliders)))
-            flags[:n] = near.T
+            flags[:n] = (near & self._held(contacts, x0, x_new)).T
             self.ghosts.update(flags)
             touching = flags.T > 0.5
         if self.detector is not None:
@@ -533,6 +533,22 @@ class ContactModel:
             out[eq15] = velocity_response(v[eq15], normal[eq15], body_v[eq15],
                                           np.maximum(0.0, 1.0 - mu[eq15]), 0.0)
         return out
+
+    def _held(self, contacts: Contacts | None, before, after) -> np.ndarray:
+        """(k, n_owned) bool: the owned vertices this step's contacts held
+        (per collider) or the fail-safe put back (any collider).  Only these
+        are kept as contacts by the next step: a vertex that merely ended
+        in the band, not pressed (the cloth leaving a body tangentially stays
+        within 0.5 d of it for a few cells), would be held still and then
+        released as adhesive in every step, the contact passes' chatter
+        (docs/collisions.md, "Which contacts a step keeps")."""
+        n = self.n_owned
+        held = np.zeros((len(self.colliders), n), dtype=bool)
+        if contacts is not None and contacts.index.size:
+            mine = contacts.index < n
+            held[contacts.collider[mine], contacts.index[mine]] = True
+        held |= np.any(after[:n] != before[:n], axis=1)[None]
+        return held
 
     def _failsafe(self, x_new, v_new, t_end):
         """Distance-field colliders at the end of the step: vertices inside

@@ -14,8 +14,9 @@ gravity before the first).  It becomes a contact when
   prescribed as ``v_b.n + (d - phi)/h``, so it ends the step exactly at
   phi = d (to first order in the curvature); a vertex already inside is
   pushed out over one step; or
-* it touched the body at the end of the last step (within 1.5 d) and the
-  prediction stays within that band (it is *kept*): its normal velocity is
+* the last step's contacts held it against the body, or the fail-safe put
+  it back, and it ended within 1.5 d, and the prediction stays within that
+  band (it is *kept*): its normal velocity is
   held at ``v_b.n + min(v_free, 0)``, its free-flight approach or rest,
   never a pull toward the body.
 
