@@ -15,8 +15,8 @@ A step of size h from the committed state (x, v) at time t:
   as often as it needs them (once per Newton iteration, four times per RK4
   step); with body contacts the attempt is solved again while the contact
   set changes (a contact turned adhesive, a free vertex ended inside a
-  body), at most four passes, loosely until the set settles and then once
-  more at the scene's tolerance;
+  body), loosely until the set settles and then once more at the scene's
+  tolerance, at most four passes (five when the first ones are loose);
 * ``strain_limiting``, ``collision:response`` and ``update`` finish the attempt; the state is
   then checked (NaN, speed, strain, energy) and committed or restored;
 * ``diagnostics`` and ``output`` report the committed step.

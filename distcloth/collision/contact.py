@@ -483,11 +483,12 @@ class ContactModel:
         touching = None
         if self.colliders:
             x0, v0 = x_new.copy(), v_new.copy()
-            x_new, v_new, report.max_penetration, report.projected_vertices, near = \
+            x_new, v_new, report.max_penetration, put_back, near = \
                 self._failsafe(x_new, v_new, t_end)
+            report.projected_vertices = int(put_back.sum())
             report.failsafe_work = self._work_of_change(x0, v0, x_new, v_new)
             flags = np.zeros((self.n_local, len(self.colliders)))
-            flags[:n] = (near & self._held(contacts, x0, x_new)).T
+            flags[:n] = (near & self._held(contacts, put_back)).T
             self.ghosts.update(flags)
             touching = flags.T > 0.5
         if self.detector is not None:
@@ -534,7 +535,7 @@ class ContactModel:
                                           np.maximum(0.0, 1.0 - mu[eq15]), 0.0)
         return out
 
-    def _held(self, contacts: Contacts | None, before, after) -> np.ndarray:
+    def _held(self, contacts: Contacts | None, put_back) -> np.ndarray:
         """(k, n_owned) bool: the owned vertices this step's contacts held
         (per collider) or the fail-safe put back (any collider).  Only these
         are kept as contacts by the next step: a vertex that merely ended
@@ -547,7 +548,7 @@ class ContactModel:
         if contacts is not None and contacts.index.size:
             mine = contacts.index < n
             held[contacts.collider[mine], contacts.index[mine]] = True
-        held |= np.any(after[:n] != before[:n], axis=1)[None]
+        held |= put_back[None]
         return held
 
     def _failsafe(self, x_new, v_new, t_end):
@@ -564,7 +565,7 @@ class ContactModel:
         touching = (phis < (1.0 + BAND_FRACTION) * offsets) & free[None]
         x_new, v_new, moved = self._project_out(x_new, v_new, t_end, free,
                                                 (phis, normals, vels, offsets))
-        return x_new, v_new, pen, int(moved.sum()), touching
+        return x_new, v_new, pen, moved, touching
 
     def _triangle_contact(self, state, x_new, v_new, h, gain, report):
         """Bridson et al. 2002 on the all-gathered cloth plus the mesh
