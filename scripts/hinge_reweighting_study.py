@@ -33,64 +33,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-SQ2 = np.sqrt(2.0)
-N_HAT = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]) / np.sqrt(3.0)
-
-
-def plane_coordinates(x):
-    """2-D coordinates of a flat rest shape in its best-fit plane."""
-    c = x - x.mean(axis=0)
-    return c @ np.linalg.svd(c, full_matrices=False)[2][:2].T
-
-
-def sym_basis_modulo_n():
-    """An orthonormal basis (Frobenius) of the symmetric 3x3 matrices orthogonal to N."""
-    basis = []
-    for i in range(3):
-        e = np.zeros((3, 3))
-        e[i, i] = 1.0
-        basis.append(e)
-    for i, j in ((0, 1), (0, 2), (1, 2)):
-        e = np.zeros((3, 3))
-        e[i, j] = e[j, i] = 1.0 / SQ2
-        basis.append(e)
-    flat = np.array([(b - np.sum(b * N_HAT) * N_HAT).ravel() for b in basis])
-    return np.linalg.svd(flat)[2][:5].reshape(5, 3, 3)
-
-
-def star_conditions(x_rest, triangles, hinge):
-    """(G, rhs, interior): G @ s - rhs are the five conditions per interior
-    vertex for hinge scales s, relative to B A_v (B drops out)."""
-    import scipy.sparse as sp
-    from distcloth.physics.bending import C_HINGE
-    from distcloth.physics.bending_shell import _hinge_weights
-    p = plane_coordinates(np.asarray(x_rest, dtype=np.float64))
-    pts = [np.c_[p[hinge[:, a]], np.zeros(len(hinge))] for a in range(4)]
-    w = _hinge_weights(*pts)
-    M = sum(w[:, a, None, None] * pts[a][:, :2, None] * pts[a][:, None, :2] for a in range(4))
-    c = 0.5 * np.stack([M[:, 0, 0], M[:, 1, 1], SQ2 * M[:, 0, 1]], axis=1)
-    e = pts[1] - pts[0]
-    area = 0.5 * (np.abs(np.cross(e, pts[2] - pts[0])[:, 2])
-                  + np.abs(np.cross(pts[3] - pts[0], e)[:, 2]))
-    kb = C_HINGE * np.einsum("ij,ij->i", e, e) / area             # per unit B
-    basis = sym_basis_modulo_n()
-    s5 = np.einsum("kij,hi,hj->hk", basis, c, c) * kb[:, None]
-    nv, nh = len(p), len(hinge)
-    t = p[triangles]
-    tri_area = 0.5 * np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-    vertex_area = np.bincount(triangles.ravel(), np.repeat(tri_area / 3.0, 3), nv)
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
-                                    triangles[:, [2, 0]]]), axis=1)
-    unique, count = np.unique(edges, axis=0, return_counts=True)
-    interior = np.ones(nv, dtype=bool)
-    interior[unique[count == 1].ravel()] = False
-    rows = np.concatenate([5 * hinge[:, end, None] + np.arange(5) for end in (0, 1)]).ravel()
-    cols = np.tile(np.repeat(np.arange(nh), 5), 2)
-    vals = np.concatenate([0.5 * s5 / vertex_area[hinge[:, end], None] for end in (0, 1)]).ravel()
-    G = sp.csr_matrix((vals, (rows, cols)), shape=(5 * nv, nh))
-    keep = np.flatnonzero(np.repeat(interior, 5))
-    rhs = np.tile(np.einsum("kij,ij->k", basis, 0.5 * np.eye(3)), nv)
-    return G[keep], rhs[keep], interior
+from distcloth.physics.hinge_consistency import star_conditions  # noqa: E402
 
 
 def fit_scales(x_rest, triangles, hinge, pull=0.05, bounds=(0.2, 5.0)):

@@ -40,7 +40,7 @@ B_STRIP = 1.0e-4                        # N.m: bending length c = (B/w)^(1/3) = 
 ASTM_ANGLE = 41.5                       # degrees
 MODELS = (("fem", "grid_lines"), ("fem", "dihedral_shell"), ("fem", "isometric_shell"),
           ("fem", "dihedral"), ("fem", "isometric"), ("mass_spring", "flexion"))
-MESH_KINDS = ("alternating", "regular", "delaunay")
+MESH_KINDS = ("alternating", "regular", "delaunay", "frontal")
 
 
 # ------------------------------------------------------------------ reference
@@ -100,6 +100,39 @@ def _mesh_dir():
     return path
 
 
+def frontal_strip_mesh(h, width, length, clamp):
+    """The strip as distcloth meshes a garment panel: the overhang [0, length]
+    x [0, width] by the panel mesher (Gmsh's Frontal-Delaunay, outline split
+    evenly at spacing ~h), and one column of vertices at x = -clamp joined to
+    the mesher's column at x = 0 by split quads (the clamp)."""
+    from distcloth.garment.mesh import ALGORITHMS, _triangulate
+    nx = int(round(length / h))
+    ny = max(2, int(round(width / h)))
+    xs = np.linspace(0.0, length, nx + 1)
+    ys = np.linspace(0.0, width, ny + 1)
+    # counter-clockwise outline from (0, 0): bottom, tip, top, clamp line
+    outline = np.concatenate([
+        np.column_stack([xs[:-1], np.zeros(nx)]),
+        np.column_stack([np.full(ny, length), ys[:-1]]),
+        np.column_stack([xs[::-1][:-1], np.full(nx, width)]),
+        np.column_stack([np.zeros(ny), ys[::-1][:-1]])])
+    v2, tri = _triangulate(outline, h, ALGORITHMS[0][0], "peirce strip")
+    n = v2.shape[0]
+    # the clamp line's vertices in the outline, bottom to top
+    line = np.concatenate([[0], np.arange(outline.shape[0] - 1, outline.shape[0] - ny - 1, -1)])
+    assert np.allclose(v2[line, 0], 0.0) and np.all(np.diff(v2[line, 1]) > 0)
+    back = n + np.arange(ny + 1)
+    quads = [(back[j], back[j + 1], line[j + 1]) for j in range(ny)] + \
+            [(back[j], line[j + 1], line[j]) for j in range(ny)]
+    v = np.concatenate([v2, np.column_stack([np.full(ny + 1, -clamp), ys])])
+    tri = np.concatenate([tri, np.array(quads, dtype=np.int64)])
+    a = v[tri]
+    area = ((a[:, 1, 0] - a[:, 0, 0]) * (a[:, 2, 1] - a[:, 0, 1])
+            - (a[:, 1, 1] - a[:, 0, 1]) * (a[:, 2, 0] - a[:, 0, 0]))
+    tri[area < 0] = tri[area < 0][:, [0, 2, 1]]
+    return np.column_stack([v, np.zeros(len(v))]), tri
+
+
 # ------------------------------------------------------------------ simulation
 
 @functools.lru_cache(maxsize=None)
@@ -129,9 +162,12 @@ def simulate(length, h, kind, model="fem", bending_model="dihedral_shell", B=B_S
                                             "resolution": [nx + 2, ny + 1], "pattern": kind},
                                    "center": [(length - dx) / 2, 0.0, 0.0]}
     else:
-        from test_elastica import strip_mesh
         dx = length / int(round(length / h))
-        v, tri = strip_mesh(h, WIDTH, length=length, clamp=dx)
+        if kind == "frontal":
+            v, tri = frontal_strip_mesh(h, WIDTH, length, dx)
+        else:
+            from test_elastica import strip_mesh
+            v, tri = strip_mesh(h, WIDTH, length=length, clamp=dx)
         path = os.path.join(_mesh_dir(), f"strip-{length:.6g}-{h:g}.obj")
         write_obj(path, v, tri, header="Peirce strip, tests/peirce.py")
         raw["cloth"][0]["mesh"] = {"file": path, "center": [(length - dx) / 2, WIDTH / 2, 0.0]}

@@ -35,12 +35,14 @@ def test_reference_overhang_and_formula():
     assert 0.3 <= d1 <= 1.0 and 8.0 <= d1 / d2 <= 12.0, (d1, d2)
 
 
-@pytest.mark.parametrize("kind", p.MESH_KINDS)
+@pytest.mark.parametrize("kind", ["alternating", "regular", "delaunay"])
 def test_dihedral_shell_bending_length_within_two_percent(kind):
     """FE + dihedral_shell, h = 10 mm.  Measured c error against the discrete
     clamp's elastica at 0.8 / 1.0 / 1.2 L*: alternating -0.97 / -0.97 /
     -0.95 %, regular +1.85 / +1.45 / +1.18 % (the curvature-jump penalty's
-    bias, docs/fidelity.md), Delaunay -0.10 / -0.22 / -0.25 %."""
+    bias, docs/fidelity.md), Delaunay -0.10 / -0.22 / -0.25 %.  (On the
+    Frontal-Delaunay strip it is +2.40 / +2.00 / +1.58 % at 10 mm and within
+    1.6 % from 5 mm on: the same stiff bias, not tested here.)"""
     for frac in FRACTIONS:
         r = p.peirce_row(frac, COARSE, kind, "fem", "dihedral_shell")
         assert r["residual"] <= 1e-6
@@ -71,14 +73,36 @@ def test_grid_lines_bending_length_within_half_a_percent(kind):
 
 
 @pytest.mark.parametrize("bending_model", ["dihedral", "isometric"])
-def test_per_hinge_models_are_too_compliant(bending_model):
+def test_per_hinge_models_within_two_percent_on_the_panel_meshers_meshes(bending_model):
+    """The per-hinge sums, `dihedral` the fem default on sewing patterns and
+    mesh files, are the plate where every vertex star meets five conditions
+    (physics/hinge_consistency.py), which near-equilateral triangles nearly
+    do.  On the strip meshed as distcloth meshes a garment panel (Gmsh's
+    Frontal-Delaunay, tests/peirce.py ``frontal_strip_mesh``) the measured c
+    error against the discrete clamp's elastica at 0.8 / 1.0 / 1.2 L* is
+    -0.71 / -0.03 / -0.13 % at h = 10 mm and -1.27 / -0.85 / +0.21 % at 5 mm
+    (dihedral; isometric within 0.2 % of it), -1.41 / 0.00 / -0.86 % at
+    2.5 mm (docs/fidelity.md): within the standard's 2 % at every size,
+    where the same models on jittered or right-angled meshes are 1.3-6 %
+    short (below)."""
+    for h in (COARSE, COARSE / 2):
+        for frac in FRACTIONS:
+            r = p.peirce_row(frac, h, "frontal", "fem", bending_model)
+            assert r["residual"] <= 1e-6
+            assert abs(r["c_error_clamp"]) <= 0.02, (h, frac, r)
+
+
+@pytest.mark.parametrize("bending_model", ["dihedral", "isometric"])
+def test_per_hinge_models_are_too_compliant_on_poorly_shaped_meshes(bending_model):
     """KNOWN DEFECT, characterised (docs/fidelity.md, docs/mesh_independence.md):
-    the per-hinge sums, `dihedral` the fem default on meshes, leave c 3-5 %
-    short (B 9-15 % low) at h = 5 mm: measured dihedral alternating -5.03 %,
-    regular -4.81 %, Delaunay -2.93 % (isometric within 0.1 % of it), and the
-    error does not shrink with h on the grids.  If this fails because the
-    error fell under 2 %, the model improved: update it and docs/fidelity.md."""
-    for kind in p.MESH_KINDS:
+    on meshes far from equilateral the per-hinge sums leave c 3-5 % short (B
+    9-15 % low) at h = 5 mm: measured dihedral alternating -5.03 %, regular
+    -4.81 %, jittered Delaunay -2.93 % (isometric within 0.1 % of it), and
+    the error does not shrink with h on the grids (where the default is
+    grid_lines).  A scene whose mesh file is like that is warned at load
+    (tests/test_hinge_consistency.py).  If this fails because the error fell
+    under 2 %, the model improved: update it and docs/fidelity.md."""
+    for kind in ("alternating", "regular", "delaunay"):
         r = p.peirce_row(1.0, COARSE / 2, kind, "fem", bending_model)
         assert -0.07 <= r["c_error_clamp"] <= -0.02, (kind, r)
 

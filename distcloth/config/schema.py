@@ -283,11 +283,12 @@ class MaterialSpec:
         if self.bending_model is not None:
             return self.bending_model
         # a fem scene made only of grids gets grid_lines (config/rules.py: the
-        # choice needs every piece); elsewhere dihedral, not dihedral_shell: the
-        # shell model is the accurate one on meshes (Peirce bending length within
-        # 2 % on every mesh kind, per-hinge sums 1-6 % short, docs/fidelity.md)
-        # but a step costs 4.6-8.3x at 10k vertices and 4.5-9x at 100k, nearly
-        # all in the solve (docs/benchmarks.md); the user chooses
+        # choice needs every piece); elsewhere dihedral, not dihedral_shell: on
+        # near-equilateral meshes (the panel mesher's) the per-hinge sum is
+        # within 1.5 % of the Peirce bending length, and the shell's step costs
+        # 4.6-8.3x at 10k vertices and 4.5-9x at 100k, nearly all in the solve
+        # (docs/fidelity.md, docs/benchmarks.md); a mesh file far from
+        # equilateral, where it is 1-6 % short, is warned at load (scene/build.py)
         return "flexion" if self.model == "mass_spring" else "dihedral"
 
     @property
