@@ -140,7 +140,7 @@ def _rows(v):
     return np.einsum("ij,ij->i", v, v)
 
 
-def _hinge_weights(p0, p1, p2, p3):
+def hinge_jump_weights(p0, p1, p2, p3):
     """Jump weights w (m, 4) of hinges (p0 -> p1, own p2, opposite p3), any
     embedding: sum_a w_a f_a is the jump of the normal derivative of the
     piecewise-linear f across the edge, positive for a convex-up fold.  w =
@@ -194,7 +194,7 @@ def shell_rest_geometry(x_rest, stencil, present, stiffness, free_edge="zero_cur
         q2 = a2 + along[:, None] * e2 + away[:, None] * out
         P = np.stack([a2, b2, c2, q2], axis=1)                  # (nt, 4, 2)
         P3 = np.concatenate([P, np.zeros((nt, 4, 1))], axis=2)
-        w = _hinge_weights(P3[:, 0], P3[:, 1], P3[:, 2], P3[:, 3])
+        w = hinge_jump_weights(P3[:, 0], P3[:, 1], P3[:, 2], P3[:, 3])
         M = np.einsum("ta,tap,taq->tpq", w, P, P)
         C[:, i] = 0.5 * np.stack([M[:, 0, 0], M[:, 1, 1], SQRT2 * M[:, 0, 1]], axis=1)
         for a, sl in enumerate((s0, s1, s2, s3)):

@@ -30,9 +30,10 @@ geometry only).
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from .bending import C_HINGE, hinges
-from .bending_shell import _hinge_weights
+from .bending_shell import hinge_jump_weights
 
 SQ2 = np.sqrt(2.0)
 N_HAT = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]) / np.sqrt(3.0)
@@ -82,7 +83,6 @@ def star_conditions(x_rest, triangles, hinge=None):
     """(G, rhs, interior): for hinge stiffness scales s (one per hinge), the
     residual of the five conditions per interior vertex is G @ s - rhs,
     relative to B A_v (B drops out).  ``hinge`` defaults to ``hinges(triangles)``."""
-    import scipy.sparse as sp
     x = np.asarray(x_rest, dtype=np.float64)
     tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     hinge = hinges(tri) if hinge is None else np.asarray(hinge, dtype=np.int64)
@@ -95,7 +95,7 @@ def star_conditions(x_rest, triangles, hinge=None):
         # the hinge's four points in the tangent plane of the star's centre
         pts = [np.c_[np.einsum("hj,hkj->hk", x[hinge[:, a]] - x[v], frames[v]), np.zeros(nh)]
                for a in range(4)]
-        w = _hinge_weights(*pts)
+        w = hinge_jump_weights(*pts)
         M = sum(w[:, a, None, None] * pts[a][:, :2, None] * pts[a][:, None, :2] for a in range(4))
         c = 0.5 * np.stack([M[:, 0, 0], M[:, 1, 1], SQ2 * M[:, 0, 1]], axis=1)
         e = pts[1] - pts[0]
