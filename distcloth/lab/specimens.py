@@ -5,8 +5,14 @@ exactly on the clamp circle so that the clamp holds whole rings: the
 clamped region is then a disc of exactly the standard's size at every
 resolution.  Ring k of radius r_k carries round(2 pi r_k / h) vertices
 (at least 6), every other ring turned by half a spacing; a Delaunay
-triangulation of the points gives near-equilateral triangles (the rings'
-convex hull is the disc's outline, so no triangle leaves the disc).
+triangulation of the points gives well-shaped triangles, angles 41-91 deg
+(the rings' convex hull is the disc's outline, so no triangle leaves the
+disc).  Their sides line up along rings and spokes, though, and the
+per-hinge bending models are not the plate on such a mesh: its hinge-star
+residual (physics/hinge_consistency.py) is 0.43-0.46 at h = 10 to 5 mm,
+where the Peirce strips with 0.41-0.49 bend 1-4 % short in bending length
+(docs/fidelity.md).  A specimen meshed by the panel mesher would need the
+clamp circle as a hole in Gmsh's outline; not done.
 """
 from __future__ import annotations
 
