@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from distcloth.garment.mesh import ALGORITHMS, _triangulate, triangle_angles  # noqa: E402
+from distcloth.garment.mesh import triangle_angles, triangulate  # noqa: E402
 from distcloth.physics.hinge_consistency import POOR_STAR_RESIDUAL, star_residual  # noqa: E402
 from distcloth.scene.meshio import write_obj  # noqa: E402
 
@@ -36,7 +36,7 @@ def main():
     phi = 2 * math.pi * np.arange(SIDES) / SIDES
     outline = RADIUS * np.column_stack([np.cos(phi), np.sin(phi)])
     h = 2 * RADIUS * math.sin(math.pi / SIDES)
-    v2, tri = _triangulate(outline, h, ALGORITHMS[0][0], "disc")
+    v2, tri = triangulate(outline, h, name="disc")
     v = np.column_stack([v2, np.zeros(len(v2))])
     residual = star_residual(v, tri)
     angles = triangle_angles(v2, tri)

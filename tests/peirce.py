@@ -105,7 +105,7 @@ def frontal_strip_mesh(h, width, length, clamp):
     x [0, width] by the panel mesher (Gmsh's Frontal-Delaunay, outline split
     evenly at spacing ~h), and one column of vertices at x = -clamp joined to
     the mesher's column at x = 0 by split quads (the clamp)."""
-    from distcloth.garment.mesh import ALGORITHMS, _triangulate
+    from distcloth.garment.mesh import triangulate
     nx = int(round(length / h))
     ny = max(2, int(round(width / h)))
     xs = np.linspace(0.0, length, nx + 1)
@@ -116,7 +116,7 @@ def frontal_strip_mesh(h, width, length, clamp):
         np.column_stack([np.full(ny, length), ys[:-1]]),
         np.column_stack([xs[::-1][:-1], np.full(nx, width)]),
         np.column_stack([np.zeros(ny), ys[::-1][:-1]])])
-    v2, tri = _triangulate(outline, h, ALGORITHMS[0][0], "peirce strip")
+    v2, tri = triangulate(outline, h, name="peirce strip")
     n = v2.shape[0]
     # the clamp line's vertices in the outline, bottom to top
     line = np.concatenate([[0], np.arange(outline.shape[0] - 1, outline.shape[0] - ny - 1, -1)])

@@ -162,23 +162,33 @@ def _gmsh():
     return _gmsh_module
 
 
-def _triangulate(outline: np.ndarray, h: float, algorithm: int, name: str):
-    """Gmsh's ``algorithm`` on the closed outline (n, 2), in units of h so the
-    target size is 1; returns vertices (outline first, bit for bit) and
-    triangles, or raises MeshError if the algorithm fails or changes the
-    outline."""
+def _triangulate(outline: np.ndarray, h: float, algorithm: int, name: str,
+                 holes: tuple[np.ndarray, ...] = ()):
+    """Gmsh's ``algorithm`` on the closed outline (n, 2) less the closed
+    ``holes`` inside it, in units of h so the target size is 1; returns
+    vertices (the outline's, then each hole's, bit for bit, then the
+    interior's) and triangles, or raises MeshError if the algorithm fails
+    or changes a boundary."""
     gmsh = _gmsh()
-    n = outline.shape[0]
-    scaled = outline / h
-    tags = np.arange(1, n + 1)
+    curves = [np.asarray(outline, dtype=np.float64)] + [np.asarray(c, dtype=np.float64)
+                                                         for c in holes]
+    sizes = [c.shape[0] for c in curves]
+    n = sum(sizes)
     gmsh.clear()
     gmsh.option.setNumber("Mesh.Algorithm", algorithm)
-    # the outline as one discrete curve, already meshed: its nodes and segments are final
-    gmsh.model.addDiscreteEntity(1, 1)
-    gmsh.model.mesh.addNodes(1, 1, tags, np.column_stack([scaled, np.zeros(n)]).ravel())
-    gmsh.model.mesh.addElementsByType(1, 1, [], np.column_stack([tags, np.roll(tags, -1)]).ravel())
-    gmsh.model.geo.addCurveLoop([1], 1)
-    gmsh.model.geo.addPlaneSurface([1], 1)
+    # each boundary as a discrete curve, already meshed: its nodes and segments are final
+    first, loops, tag_lists = 1, [], []
+    for k, curve in enumerate(curves, start=1):
+        tags = np.arange(first, first + curve.shape[0])
+        first += curve.shape[0]
+        gmsh.model.addDiscreteEntity(1, k)
+        gmsh.model.mesh.addNodes(1, k, tags,
+                                 np.column_stack([curve / h, np.zeros(len(curve))]).ravel())
+        gmsh.model.mesh.addElementsByType(k, 1, [],
+                                          np.column_stack([tags, np.roll(tags, -1)]).ravel())
+        loops.append(gmsh.model.geo.addCurveLoop([k], k))
+        tag_lists.append(tags)
+    gmsh.model.geo.addPlaneSurface(loops, 1)
     gmsh.model.geo.synchronize()
     label = dict(ALGORITHMS).get(algorithm, algorithm)
     gmsh.logger.start()
@@ -192,28 +202,58 @@ def _triangulate(outline: np.ndarray, h: float, algorithm: int, name: str):
     if errors:
         raise MeshError(f"panel {name!r}: Gmsh's {label} failed ({'; '.join(errors)}); does "
                         "the outline touch itself?")
-    on_outline, xyz, _ = gmsh.model.mesh.getNodes(1, 1)
-    if not (np.array_equal(on_outline, tags)
-            and np.array_equal(xyz.reshape(-1, 3)[:, :2], scaled)):
-        raise MeshError(f"panel {name!r}: Gmsh's {label} changed the outline")
+    for k, (curve, tags) in enumerate(zip(curves, tag_lists), start=1):
+        on_curve, xyz, _ = gmsh.model.mesh.getNodes(1, k)
+        if not (np.array_equal(on_curve, tags)
+                and np.array_equal(xyz.reshape(-1, 3)[:, :2], curve / h)):
+            raise MeshError(f"panel {name!r}: Gmsh's {label} changed the outline")
     inner, xyz, _ = gmsh.model.mesh.getNodes(2, 1)
     _, nodes = gmsh.model.mesh.getElementsByType(2)
     index = np.full(max(n, int(inner.max(initial=0))) + 1, -1, dtype=np.int64)
-    index[tags] = np.arange(n)
+    index[1:n + 1] = np.arange(n)
     index[inner.astype(np.int64)] = n + np.arange(inner.size)
     tris = index[nodes.astype(np.int64).reshape(-1, 3)]
-    verts = np.concatenate([outline, xyz.reshape(-1, 3)[:, :2] * h])
-    # a disc's triangulation: 2V - n - 2 triangles, every vertex used, the
-    # triangles' areas adding up to the outline polygon's (no overlap, no hole)
+    verts = np.concatenate(curves + [xyz.reshape(-1, 3)[:, :2] * h])
+    # a disc with m holes: 2V - n - 2 + 2m triangles (Euler), every vertex
+    # used, the triangles' areas adding up to the region's (no overlap, no gap)
     a, b, c = (verts[tris[:, k]] for k in range(3))
     area = np.abs(_cross(b - a, c - a)).sum() / 2.0
-    x, y = outline[:, 0], outline[:, 1]
-    polygon = abs(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)) / 2.0
-    if (tris.shape[0] != 2 * verts.shape[0] - n - 2 or np.any(tris < 0)
+    region = sum((1 if k == 0 else -1) * abs(_polygon_area(curve)) for k, curve in enumerate(curves))
+    if (tris.shape[0] != 2 * verts.shape[0] - n - 2 + 2 * len(holes) or np.any(tris < 0)
             or np.any(np.bincount(tris.ravel(), minlength=verts.shape[0]) == 0)
-            or abs(area - polygon) > 1e-9 * polygon):
+            or abs(area - region) > 1e-9 * region):
         raise MeshError(f"panel {name!r}: Gmsh's {label} did not tile the outline")
     return verts, tris
+
+
+def triangulate(outline: np.ndarray, h: float, holes: tuple[np.ndarray, ...] = (),
+                name: str = "region"):
+    """A region meshed as a panel is, for specimens and test shapes: the
+    closed ``outline`` (n, 2) less ``holes``, every boundary vertex kept and
+    first in the result (outline, then holes), interior at target edge h,
+    Gmsh's algorithms tried in the panel mesher's order until one reaches
+    ``MIN_ANGLE`` (else the last one's mesh); returns (vertices (V, 2),
+    triangles (T, 3), counter-clockwise)."""
+    best = None
+    for algorithm, _ in ALGORITHMS:
+        try:
+            verts, tris = _triangulate(outline, h, algorithm, name, holes)
+        except MeshError:
+            continue
+        a, b, c = (verts[tris[:, k]] for k in range(3))
+        flip = _cross(b - a, c - a) < 0
+        tris[flip] = tris[flip][:, [0, 2, 1]]
+        best = (verts, tris)
+        if triangle_angles(verts, tris).min() >= MIN_ANGLE:
+            break
+    if best is None:
+        raise MeshError(f"{name!r}: no Gmsh algorithm meshed it")
+    return best
+
+
+def _polygon_area(curve: np.ndarray) -> float:
+    x, y = curve[:, 0], curve[:, 1]
+    return float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)) / 2.0
 
 
 def _encroached(outline: np.ndarray, verts: np.ndarray, bad: np.ndarray) -> np.ndarray:

@@ -1,46 +1,43 @@
 """Specimen meshes of the fabric tests, as arrays (points, triangles).
 
-The drape specimen is a disc meshed in concentric rings, with one ring
-exactly on the clamp circle so that the clamp holds whole rings: the
-clamped region is then a disc of exactly the standard's size at every
-resolution.  Ring k of radius r_k carries round(2 pi r_k / h) vertices
-(at least 6), every other ring turned by half a spacing; a Delaunay
-triangulation of the points gives well-shaped triangles, angles 41-91 deg
-(the rings' convex hull is the disc's outline, so no triangle leaves the
-disc).  Their sides line up along rings and spokes, though, and the
-per-hinge bending models are not the plate on such a mesh: its hinge-star
-residual (physics/hinge_consistency.py) is 0.43-0.46 at h = 10 to 5 mm,
-where the Peirce strips with 0.41-0.49 bend 1-4 % short in bending length
-(docs/fidelity.md).  A specimen meshed by the panel mesher would need the
-clamp circle as a hole in Gmsh's outline; not done.
+The drape specimen is a disc meshed as distcloth meshes a garment panel
+(Gmsh's Frontal-Delaunay, ``garment.mesh.triangulate``), in two regions
+that share the clamp circle's vertices: the clamped disc, and the annulus
+around it with that circle as a hole.  The clamp then holds exactly the
+standard's disc at every resolution, and the triangles are near-equilateral,
+on which the per-hinge bending models (the default on meshes) are the plate
+(hinge-star residual 0.08-0.10, physics/hinge_consistency.py; the rings of
+points triangulated before gave 0.43-0.46, where the Peirce strips bend
+1-4 % short, docs/fidelity.md).
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import Delaunay
+
+from ..garment.mesh import triangulate
 
 
-def ring_radii(radius: float, clamp_radius: float, h: float) -> np.ndarray:
-    """Ring radii from 0 to ``radius`` at spacing ~h, one ring on ``clamp_radius``."""
-    inner = max(1, int(round(clamp_radius / h)))
-    outer = max(1, int(round((radius - clamp_radius) / h)))
-    return np.concatenate([np.linspace(0.0, clamp_radius, inner + 1),
-                           np.linspace(clamp_radius, radius, outer + 1)[1:]])
+def _circle(radius: float, h: float) -> np.ndarray:
+    """A regular polygon on the circle, counter-clockwise, sides ~h (at least 6)."""
+    count = max(6, int(round(2.0 * np.pi * radius / h)))
+    phi = np.arange(count) * (2.0 * np.pi / count)
+    return radius * np.column_stack([np.cos(phi), np.sin(phi)])
 
 
 def disc(radius: float, clamp_radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
     """(points (n, 3) in the z = 0 plane, centred on the origin; triangles (m, 3)
-    counter-clockwise seen from +z)."""
-    pts = [np.zeros((1, 2))]
-    for k, r in enumerate(ring_radii(radius, clamp_radius, h)[1:], start=1):
-        count = max(6, int(round(2.0 * np.pi * r / h)))
-        phi = (np.arange(count) + 0.5 * (k % 2)) * (2.0 * np.pi / count)
-        pts.append(r * np.column_stack([np.cos(phi), np.sin(phi)]))
-    p2 = np.concatenate(pts)
-    tri = Delaunay(p2).simplices.astype(np.int64)
-    a, b, c = p2[tri[:, 0]], p2[tri[:, 1]], p2[tri[:, 2]]
-    cw = ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]) < 0.0
-    tri[cw] = tri[cw][:, [0, 2, 1]]
+    counter-clockwise seen from +z).  The clamp circle's vertices lie at
+    ``clamp_radius`` to round-off, the outline's at ``radius``."""
+    rim, clamp = _circle(radius, h), _circle(clamp_radius, h)
+    outer_pts, outer_tri = triangulate(rim, h, holes=(clamp,), name="drape specimen")
+    inner_pts, inner_tri = triangulate(clamp, h, name="drape specimen's clamped disc")
+    # the inner mesh's first vertices are the clamp circle's, which the outer
+    # mesh holds right after the rim: renumber them onto those
+    shared = clamp.shape[0]
+    index = np.concatenate([rim.shape[0] + np.arange(shared),
+                            outer_pts.shape[0] + np.arange(inner_pts.shape[0] - shared)])
+    p2 = np.concatenate([outer_pts, inner_pts[shared:]])
+    tri = np.concatenate([outer_tri, index[inner_tri]])
     return np.column_stack([p2, np.zeros(len(p2))]), tri
 
 
