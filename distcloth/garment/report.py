@@ -2,8 +2,11 @@
 
     python -m distcloth.garment.report PATTERN... [--edge 0.02]
 
-Per panel: outline, vertex and triangle counts, the smallest angle, and the
-shortest, median and longest edge over the target; per stitch: the two
+Per panel: outline, vertex and triangle counts, the smallest angle, the
+shortest, median and longest edge over the target, and the hinge-star
+residual (how far the mesh is from those on which per-hinge bending, the
+default on patterns, is the plate: physics/hinge_consistency.py, warned
+above 0.3 for mesh files); per stitch: the two
 sides' arc lengths and their mismatch, (a - b) / max(a, b).
 """
 from __future__ import annotations
@@ -12,6 +15,7 @@ import argparse
 
 import numpy as np
 
+from ..physics.hinge_consistency import star_residual
 from .mesh import GarmentMesh, mesh_pattern, triangle_angles
 from .pattern import Pattern, SeamSide, load_pattern
 
@@ -36,16 +40,18 @@ def _side_name(side: SeamSide) -> str:
 def panel_table(mesh: GarmentMesh) -> list[str]:
     h = mesh.target_edge
     rows = ["| panel | outline | vertices | triangles | min angle (°) | edge / h: min | median "
-            "| max |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+            "| max | hinge-star residual |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for p in mesh.panels:
         angle = triangle_angles(p.vertices, p.triangles).min()
         length = edge_lengths(p.vertices, p.triangles) / h
+        flat = np.column_stack([p.vertices, np.zeros(p.vertices.shape[0])])
         rows.append(f"| {p.panel.name} | {p.n_outline} | {p.vertices.shape[0]} | "
                     f"{p.triangles.shape[0]} | {angle:.1f} | {length.min():.2f} | "
-                    f"{np.median(length):.2f} | {length.max():.2f} |")
+                    f"{np.median(length):.2f} | {length.max():.2f} | "
+                    f"{star_residual(flat, p.triangles):.2f} |")
     total_v = sum(p.vertices.shape[0] for p in mesh.panels)
     total_t = sum(p.triangles.shape[0] for p in mesh.panels)
-    rows.append(f"| all | | {total_v} | {total_t} | | | | |")
+    rows.append(f"| all | | {total_v} | {total_t} | | | | | |")
     return rows
 
 
