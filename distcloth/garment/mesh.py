@@ -172,8 +172,7 @@ def _triangulate(outline: np.ndarray, h: float, algorithm: int, name: str,
     gmsh = _gmsh()
     curves = [np.asarray(outline, dtype=np.float64)] + [np.asarray(c, dtype=np.float64)
                                                          for c in holes]
-    sizes = [c.shape[0] for c in curves]
-    n = sum(sizes)
+    n = sum(c.shape[0] for c in curves)
     gmsh.clear()
     gmsh.option.setNumber("Mesh.Algorithm", algorithm)
     # each boundary as a discrete curve, already meshed: its nodes and segments are final
