@@ -112,7 +112,7 @@ def open_writer(sim, cfg, comm, path, diagnostic_names, extra_attrs, arrays=None
                         rest_positions=sim.model.rest_positions, triangles=sim.model.triangles,
                         owned_input=lay.owned_input, part=lay.part, config_text=cfg.source_text,
                         attrs=attrs, stage_names=list(STAGES), diagnostic_names=diagnostic_names,
-                        colliders=collider_surfaces(sim.contact.colliders,
+                        colliders=collider_surfaces(sim.contact.bodies,
                                                     sim.model.rest_positions),
                         arrays=arrays, fields=FRAME_FIELDS, resume_step=resume_step)
 
@@ -240,7 +240,7 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
     for name, (du, dv) in bounds.items():
         log(comm, f"image-space collider {name}: x-y error bound (Vassilev et al. 2001 Eq. 14) "
                   f"{1e3 * du:.2f} x {1e3 * dv:.2f} mm")
-    for c in sim.contact.colliders:
+    for c in sim.contact.bodies:
         if c.region is not None:
             log(comm, f"collider {c.name} in contact: {c.region}")
         spread = getattr(c.body, "arm_spread_degrees", None)

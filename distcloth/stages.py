@@ -53,7 +53,7 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage("collision:bodies", "colliders and the collisions effect",
           "x, v, colliders at t, contacts the attempt released or missed", "contacts",
           "vertices predicted to end a step of free flight within the contact distance of a "
-          "body become unilateral contacts"),
+          "body, or of the garments worn under theirs, become unilateral contacts"),
     Stage("constraints", "always", "held vertices, contacts, v", "constraints (S, z)",
           "pins, sliding pins and contacts as per-vertex projections S and velocity changes z"),
     Stage("force:gravity", "effect gravity", "vertex masses", "forces",

@@ -110,3 +110,28 @@ def test_resting_triangle_is_not_lifted_but_an_approaching_one_is_stopped():
     end = cloth + 0.01 * u
     gap = end.mean(axis=0)[2] - R
     assert gap > 0.99 * keep[3]
+
+
+def test_pairs_between_layers_keep_the_lower_layers_clearance():
+    # vertex-face stencils (coef[:, 0] = 1) and edge-edge ones (coef[:, 0] < 0)
+    # over vertices 0-1 (a body, priority -1), 2-5 (layer 0), 6-9 (layer 1);
+    # keep: the body's clearance 1, the inner garment's 2, thickness 3
+    priority = np.array([-1, -1, 0, 0, 0, 0, 1, 1, 1, 1], float)
+    keep = np.array([1.0, 1.0, 2.0, 2.0, 2.0, 2.0, 3.0, 3.0, 3.0, 3.0])
+    vf = np.array([1.0, -0.3, -0.3, -0.4])
+    ee = np.array([-0.5, -0.5, 0.5, 0.5])
+    ids = np.array([[2, 6, 7, 8],      # inner vertex under an outer face: the inner's
+                    [6, 2, 3, 4],      # outer vertex over an inner face: thickness
+                    [2, 3, 4, 5],      # one layer: thickness
+                    [0, 2, 3, 4],      # body vertex under the inner garment: the body's
+                    [2, 3, 6, 7],      # inner edge under an outer edge: the inner's
+                    [6, 7, 2, 3],      # the same pair the other way round
+                    [2, 3, 4, 5],      # edges of one layer: thickness
+                    [0, 1, 6, 7]])     # a body edge under the outer garment: the body's
+    coef = np.array([vf, vf, vf, vf, ee, ee, ee, ee])
+    np.testing.assert_array_equal(I.pair_thickness(ids, coef, 3.0, keep, priority),
+                                  [2.0, 3.0, 3.0, 1.0, 2.0, 2.0, 3.0, 1.0])
+    # without layers, the per-vertex rule: a vertex-face pair its vertex's, an
+    # edge-edge pair the smaller of its four
+    np.testing.assert_array_equal(I.pair_thickness(ids, coef, 3.0, keep),
+                                  [2.0, 3.0, 2.0, 1.0, 2.0, 2.0, 2.0, 1.0])

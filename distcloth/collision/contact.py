@@ -10,7 +10,9 @@ calls are array functions in ``response.py``, ``friction.py``,
    each with its thickness, friction, motion and, chosen here once for the
    scene, its **friction law**: in the solve for implicit schemes
    (``force:friction``), after the step for explicit ones, and Vassilev et
-   al.'s Eq. 15 for image-space colliders whatever the scheme.
+   al.'s Eq. 15 for image-space colliders whatever the scheme.  Garments
+   worn in layers add one more per outer layer: the surface of the layers
+   under it, placed anew where each step starts (``layers.py``).
 2. **Detection** (stage ``collision:bodies``, before the solve): a vertex
    predicted to come within d = cloth + collider thickness becomes a
    Baraff-Witkin constraint S = I - n n^T with the normal velocity that stops
@@ -54,6 +56,7 @@ from .colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane, Rig
 from .image_collider import ImageSpaceCollider
 from .imagespace import velocity_response
 from .impulses import ReusedCandidates, resolve
+from .layers import LayerSurface
 from .mesh_query import MeshProximity
 from .proximity import mesh_edges
 from .sagitta import body_clearance
@@ -95,12 +98,12 @@ def friction_law(kind: str, implicit: bool) -> str:
 class Collider:
     """A body the cloth collides with, as the step sees it."""
     name: str
-    kind: str                   # analytic | mesh | image
+    kind: str                   # analytic | mesh | image | layer
     query: Callable             # (x, t, max_distance) -> (phi, normal, velocity) at x
     friction: float             # Coulomb mu
     thickness: float            # m, added to the cloth's
     law: str                    # friction law (friction_law)
-    body: AnalyticCollider | MeshCollider   # geometry and motion (pictures, checks)
+    body: AnalyticCollider | MeshCollider | None   # geometry and motion (pictures, checks)
     closed: bool = True         # has an inside: the position fail-safe applies
     drive_end: float = 0.0      # s: the last keyframe or frame (it moves until then)
     mesh: MeshCollider | None = None                  # in the triangle pipeline (bvh meshes)
@@ -253,6 +256,8 @@ class ContactModel:
                 else:
                     keep.append(np.full(m.vertices(0.0).shape[0], self.thickness))
             self.pipeline_keep = np.concatenate(keep)
+            self.cloth_edge = edge
+            self.cloth_triangles = np.asarray(model.triangles, dtype=np.int64)
             # garments worn in layers: a pair between layers moves the outer
             # one only (impulses.pair_weights); the bodies rank below every layer
             layer = model.per_vertex([float(spec.layer) for spec in cfg.cloth])
@@ -274,6 +279,28 @@ class ContactModel:
             # their friction to the contact constraints)
             self.pipeline_friction = max([c.friction for c in self.colliders if c.kind == "mesh"]
                                          + [0.0])
+        # the scene's colliders (output, pictures); those of the solve also
+        # have the layers under each outer garment (layers.py)
+        self.bodies = list(self.colliders)
+        self.layer_surfaces = []
+        if self.self_collision and self.pipeline_priority is not None:
+            self._add_layer_surfaces(model, layout, implicit)
+
+    def _add_layer_surfaces(self, model, layout, implicit: bool) -> None:
+        """A collider per outer layer: the garments under it, with the
+        colliders' friction (the pipeline's mu, as between layers there)."""
+        layer = self.pipeline_priority[: model.num_vertices].astype(np.int64)
+        for k in np.unique(layer)[1:]:
+            surface = LayerSurface(int(k), layer, layout.local_input, model.triangles)
+            if surface.empty:
+                continue
+            self.layer_surfaces.append(surface)
+            self.colliders.append(Collider(
+                name=f"layers under layer {k}", kind="layer", query=surface.query,
+                friction=self.pipeline_friction, thickness=0.0,
+                law=friction_law("layer", implicit), body=None, closed=False))
+        self.in_solve = np.array([c.law == IN_SOLVE for c in self.colliders] + [False],
+                                 dtype=bool)
 
     @property
     def has_bodies(self) -> bool:
@@ -355,6 +382,11 @@ class ContactModel:
         attempt's earlier solves showed (contacts released as adhesive,
         contacts missed)."""
         x, v = state.x, state.v
+        if self.layer_surfaces and revision is None:
+            n = self.n_owned
+            rows = self.detector.gather(np.concatenate([x[:n], v[:n]], axis=1))
+            for surface in self.layer_surfaces:
+                surface.move(rows[:, :3], rows[:, 3:], state.t)
         forced = revision.missed if revision is not None else None
         exclude = self.never_contact
         if revision is not None:
@@ -583,9 +615,20 @@ class ContactModel:
         inv_mass[:det.geometry.n_cloth][free] = 1.0 / self.input_mass[free]
         g = det.geometry
         found = ReusedCandidates(det.candidates, self.thickness, CANDIDATE_SLACK * self.thickness)
+        keep = self.pipeline_keep
+        if self.layer_surfaces:
+            # a garment's vertices under one worn over it keep, as a body's
+            # do, the thickness less the outer one's sagitta over their
+            # curvature where the step starts: the solve holds the outer
+            # vertices at d from the layer's surface (layers.py), and its
+            # folds and gathers rise between them (sagitta.py)
+            keep = keep.copy()
+            keep[:g.n_cloth] = body_clearance(X0[:g.n_cloth], self.cloth_triangles,
+                                              self.thickness, self.cloth_edge,
+                                              BODY_CLEARANCE_FLOOR * self.thickness)
         U2, stats = resolve(X0, U, h, inv_mass, g.tri, g.edges, self.thickness,
                             self.pipeline_friction, found, hits=det.shared_hits, same=det.same,
-                            keep=self.pipeline_keep, priority=self.pipeline_priority)
+                            keep=keep, priority=self.pipeline_priority)
         mine = self.owned_input
         dU = U2[mine] - U[mine]
         report.impulse_hits = float(sum(stats["ccd_hits"]))

@@ -200,17 +200,30 @@ def _prep(x0, u, inv_mass, tri, edges):
             np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2))
 
 
-def pair_thickness(ids, coef, thickness, keep=None):
+def pair_thickness(ids, coef, thickness, keep=None, priority=None):
     """(k,) the distance each pair keeps: ``thickness``, or with ``keep`` (n,)
     per vertex: a vertex-face pair (coef[:, 0] = 1) its vertex's, an
     edge-edge pair the smaller of its vertices' (a primitive belongs wholly
     to the cloth or to one collider).  A cloth vertex over a body face keeps
     the cloth's: the body's distance field holds that vertex at the offset
-    anyway; a body vertex or edge under a cloth face or edge keeps the body's."""
+    anyway; a body vertex or edge under a cloth face or edge keeps the body's.
+    With ``priority`` (layers, ``pair_weights``) ``keep`` is what a vertex
+    keeps from the primitives of the layers above it, and a pair within one
+    layer keeps ``thickness``: a garment's vertex under the face of one worn
+    over it keeps its own, as a body vertex does."""
     if keep is None:
         return np.full(ids.shape[0], float(thickness))
     keep = np.asarray(keep)
-    return np.where(coef[:, 0] > 0.0, keep[ids[:, 0]], np.min(keep[ids], axis=1))
+    if priority is None:
+        return np.where(coef[:, 0] > 0.0, keep[ids[:, 0]], np.min(keep[ids], axis=1))
+    pr = np.asarray(priority)[ids]
+    under = pr[:, 0] < np.min(pr[:, 1:], axis=1)          # a vertex under a face
+    vf = np.where(under, keep[ids[:, 0]], thickness)
+    a_under = np.max(pr[:, :2], axis=1) < np.min(pr[:, 2:], axis=1)
+    b_under = np.max(pr[:, 2:], axis=1) < np.min(pr[:, :2], axis=1)
+    ee = np.where(a_under, np.min(keep[ids[:, :2]], axis=1),
+                  np.where(b_under, np.min(keep[ids[:, 2:]], axis=1), thickness))
+    return np.where(coef[:, 0] > 0.0, vf, ee)
 
 
 # ------------------------------------------------------------------ 1. proximity repulsion
@@ -232,7 +245,7 @@ def repulsion(x0, u, h, inv_mass, tri, edges, vf, ee, thickness, friction=0.0, i
     x0, u, inv_mass, tri, edges = _prep(x0, u, inv_mass, tri, edges)
     ids, coef, nrm = _cat(_vf_stencil(tri, vf.vertex, vf.face, vf.weights) + (vf.normal,),
                           _ee_stencil(edges, ee.edge_a, ee.edge_b, ee.params) + (ee.normal,))
-    target = (pair_thickness(ids, coef, thickness, keep)
+    target = (pair_thickness(ids, coef, thickness, keep, priority)
               - np.concatenate([vf.distance, ee.distance])) / h
     for _ in range(iterations):
         u, nact = _apply(u, inv_mass, ids, coef, nrm, target, friction, priority)
@@ -281,7 +294,7 @@ def ccd_impulses(x0, u, h, inv_mass, tri, edges, vf_pairs, ee_pairs, thickness,
     if ids.shape[0] == 0:
         return u, 0
     g0 = np.einsum("kd,kd->k", np.einsum("kj,kjd->kd", coef, x0[ids]), nrm)
-    th = pair_thickness(ids, coef, thickness, keep)
+    th = pair_thickness(ids, coef, thickness, keep, priority)
     target = (np.clip(g0, 0.0, th) - g0 + margin * th) / h
     for _ in range(sweeps):
         u, nact = _apply(u, inv_mass, ids, coef, nrm, target, 0.0, priority)

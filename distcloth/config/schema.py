@@ -354,9 +354,10 @@ class ClothSpec:
     follow_skin: FollowSkinSpec | None = setting(None, doc="a region that moves with the body's "
                                                   "surface instead of being simulated; null: "
                                                   "none")
-    layer: int = setting(0, doc="pattern pieces worn together: 0 innermost; a piece of layer k "
-                         "starts k * garment.layer_gap further out and is sewn after the layers "
-                         "under it (from k * garment.sewing.duration on)", at_least=0)
+    layer: int = setting(0, doc="pieces worn together: 0 innermost; a piece of layer k "
+                         "starts k * garment.layer_gap further out, is sewn after the layers "
+                         "under it (from k * garment.sewing.duration on) and, with "
+                         "self_collision, meets them in the solve as a body", at_least=0)
 
 
 @dataclass(frozen=True)
