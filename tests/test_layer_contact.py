@@ -149,3 +149,21 @@ def test_a_vertex_behind_the_layer_under_it_is_inside_it():
     np.testing.assert_allclose(normal[4:6], [[0, 0, 1], [0, 0, 1]], atol=1e-12)
     assert phi[6] == pytest.approx(np.hypot(0.01, 0.001), rel=1e-9)    # beside the edge
     assert phi[7] == 0.0 and np.allclose(normal[7], [0, 0, 1])        # on it: the front
+
+
+def test_a_drape_residual_sees_the_outer_layer_resting_on_the_inner():
+    # the drapes' residual (and the Newton drape's active set) ask the contact
+    # which vertices a collider supports: the outer sheet's, resting on the
+    # inner one, are supported by the layer under it once it is placed at the
+    # state (ContactModel.place_layers), not only the inner sheet's by the body
+    sim = make_sim(_layered_sheets(), comm=MPI.COMM_WORLD)
+    for _ in range(60):
+        sim.step()
+    contact, state, n = sim.contact, sim.state, sim.n_owned
+    contact.place_layers(state.x, state.v, state.t)
+    touching, _, _, _ = contact.support(state.x, state.t, n)
+    outer = np.asarray(contact.layer_surfaces[0].asks[:n])
+    counts = sim.comm.sum(np.array([float((touching & outer).sum()),
+                                    float((touching & ~outer).sum())]))
+    sim.destroy()
+    assert counts[0] > 20 and counts[1] > 20

@@ -375,6 +375,16 @@ class ContactModel:
             moved[np.nonzero(free)[0][inside]] = True
         return x, v, moved
 
+    def place_layers(self, x, v, t) -> None:
+        """The layers under each outer garment where the cloth is at t (local
+        rows x, v; one all-gather); nothing without layers.  Collective."""
+        if not self.layer_surfaces:
+            return
+        n = self.n_owned
+        rows = self.detector.gather(np.concatenate([x[:n], v[:n]], axis=1))
+        for surface in self.layer_surfaces:
+            surface.move(rows[:, :3], rows[:, 3:], t)
+
     # --------------------------------------------------- 2. detection
     def detect(self, state, h: float, revision: ContactRevision | None = None) -> Contacts:
         """The contact set of the attempt on every local vertex (owned and
@@ -382,11 +392,8 @@ class ContactModel:
         attempt's earlier solves showed (contacts released as adhesive,
         contacts missed)."""
         x, v = state.x, state.v
-        if self.layer_surfaces and revision is None:
-            n = self.n_owned
-            rows = self.detector.gather(np.concatenate([x[:n], v[:n]], axis=1))
-            for surface in self.layer_surfaces:
-                surface.move(rows[:, :3], rows[:, 3:], state.t)
+        if revision is None:
+            self.place_layers(x, v, state.t)
         forced = revision.missed if revision is not None else None
         exclude = self.never_contact
         if revision is not None:

@@ -108,6 +108,7 @@ class Relaxation:
         n, state = ctx.n_owned, sim.state
         f = ctx.forces(state.x, np.zeros_like(state.v), want_jac=False)[:n]
         f = ctx.project(sim.constraints(), f)     # pins hold: only their free directions count
+        sim.contact.place_layers(state.x, state.v, state.t)   # a garment rests on those under it
         # a body holds what presses on it, and static friction what stays in
         # its friction cone: a garment at rest on a body has its weight and
         # its tension carried there
@@ -246,6 +247,7 @@ class Relaxation:
         self._zero_velocities()
         x0 = state.x.copy()
         f = ctx.forces(x0, state.v, want_jac=True)
+        sim.contact.place_layers(x0, state.v, state.t)
         touching, normal, mu, _ = sim.contact.support(x0, state.t, n)
         stick, slide, friction = coulomb_active_set(f[:n], touching, normal, mu)
         held = np.nonzero(stick | slide)[0]
