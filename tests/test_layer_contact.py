@@ -2,13 +2,16 @@
 (distcloth/collision/layers.py), as the innermost meets the body.
 
 * the surface: distances, normals and velocities of an outer layer's
-  vertices against the triangles of the layers under it, nothing for the
+  vertices against the triangles of the layers under it, signed by the
+  side the triangles face (unsigned beside its boundary), nothing for the
   inner layer's own vertices or before the surface is placed, its motion
   the start velocities';
 * two sheets worn as layers over the torso mesh: the outer sheet's vertices
-  become contacts of the solve against the inner one, and resting on it
-  keeps the thickness from it (by a distance of its own), no triangles cross, the energy guard never rejects
-  a step, and 1 and 2 ranks agree.
+  become contacts of the solve against the inner one, resting on it they
+  keep the thickness from it (by a distance of its own), no triangles
+  cross, the energy guard never rejects a step, and 1 and 2 ranks agree
+  while the layer contacts begin;
+* the drapes' residual counts the outer sheet as supported by the inner one.
 """
 import numpy as np
 import pytest
