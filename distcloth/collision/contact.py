@@ -233,7 +233,6 @@ class ContactModel:
         self.gravity = np.asarray(cfg.gravity if cfg.has("gravity") else (0.0, 0.0, 0.0), float)
         self.gravity_norm = float(np.linalg.norm(self.gravity))
         # friction as a force of the solve: the colliders whose law says so
-        self.in_solve = np.array([c.law == IN_SOLVE for c in self.colliders] + [False], dtype=bool)
         self.friction_term = None
         if any(c.law == IN_SOLVE and c.friction > 0.0 for c in self.colliders):
             self.friction_term = ContactFrictionTerm(mass, self.n_owned)
@@ -285,6 +284,7 @@ class ContactModel:
         self.layer_surfaces = []
         if self.self_collision and self.pipeline_priority is not None:
             self._add_layer_surfaces(model, layout, implicit)
+        self.in_solve = np.array([c.law == IN_SOLVE for c in self.colliders] + [False], dtype=bool)
 
     def _add_layer_surfaces(self, model, layout, implicit: bool) -> None:
         """A collider per outer layer: the garments under it, with the
@@ -299,8 +299,6 @@ class ContactModel:
                 name=f"layers under layer {k}", kind="layer", query=surface.query,
                 friction=self.pipeline_friction, thickness=0.0,
                 law=friction_law("layer", implicit), body=None, closed=False))
-        self.in_solve = np.array([c.law == IN_SOLVE for c in self.colliders] + [False],
-                                 dtype=bool)
 
     @property
     def has_bodies(self) -> bool:
