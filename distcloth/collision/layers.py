@@ -35,6 +35,7 @@ import numpy as np
 
 from .colliders import MeshCollider
 from .mesh_query import MeshProximity
+from .proximity import open_edges
 
 # the surface's positions are its start positions moved on with its start
 # velocities; two frames this far apart give that motion for any step within
@@ -57,8 +58,11 @@ class LayerSurface:
         under = tri[np.all(input_layer[tri] < layer, axis=1)]
         self.vertices = np.unique(under)               # input vertices of the surface
         self.triangles = np.searchsorted(self.vertices, under)
-        self._boundary_vertex, self._boundary_edge = _boundary(self.triangles,
-                                                               self.vertices.size)
+        # the surface's boundary: its vertices, and its edges as keys i * n + j
+        edges = open_edges(self.triangles)
+        self._boundary_vertex = np.zeros(self.vertices.size, dtype=bool)
+        self._boundary_vertex[edges.ravel()] = True
+        self._boundary_edge = edges[:, 0] * self.vertices.size + edges[:, 1]
         self._proximity = None
         self._start = None        # (t0, x0, v0) of the surface's vertices
 
@@ -132,16 +136,3 @@ class LayerSurface:
             key = ends[:, 0] * self.vertices.size + ends[:, 1]
             out[edge] = np.isin(key, self._boundary_edge)
         return out
-
-
-def _boundary(triangles, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
-    """(boundary vertex mask (n,), sorted keys i * n + j of the boundary edges
-    i < j): the edges of one triangle only."""
-    e = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
-                                triangles[:, [2, 0]]]), axis=1)
-    key, count = np.unique(e[:, 0] * n_vertices + e[:, 1], return_counts=True)
-    key = key[count == 1]
-    mask = np.zeros(n_vertices, dtype=bool)
-    mask[key // n_vertices] = True
-    mask[key % n_vertices] = True
-    return mask, key

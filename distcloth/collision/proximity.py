@@ -288,6 +288,16 @@ def edge_edge_contacts(x, edges, pairs, thickness: float) -> EdgeEdgeContacts:
     return EdgeEdgeContacts(pairs[k, 0], pairs[k, 1], st[k], nrm[k], dist[k])
 
 
+def open_edges(tri) -> np.ndarray:
+    """(m, 2) the undirected edges (i < j) that belong to one triangle only:
+    a mesh's boundary."""
+    tri = np.asarray(tri, dtype=np.int64).reshape(-1, 3)
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    key = np.sort(e, axis=1)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    return key[first[counts == 1]]
+
+
 def mesh_edges(tri) -> np.ndarray:
     """Unique undirected edges (i < j) of a triangle mesh, sorted, int64 (e, 2)."""
     tri = np.asarray(tri, dtype=np.int64).reshape(-1, 3)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collision.colliders import RigidMotion
+from ..collision.proximity import open_edges
 from ..config.schema import ConfigError, PinMotionSpec
 
 
@@ -121,7 +122,7 @@ def piece_loads(spec, load_sets, positions, triangles, offset: int, key: str) ->
             forces, vertices = np.asarray(load.forces, float).reshape(-1, 3), local
         else:
             if boundary is None:
-                boundary = boundary_edges(triangles)
+                boundary = open_edges(triangles)
             chosen = np.zeros(positions.shape[0], dtype=bool)
             chosen[local] = True
             edges = boundary[chosen[boundary].all(axis=1)]
@@ -137,14 +138,6 @@ def piece_loads(spec, load_sets, positions, triangles, offset: int, key: str) ->
     return Loads(np.concatenate([p.vertices for p in parts]).astype(np.int64),
                  np.concatenate([p.forces for p in parts]),
                  np.concatenate([p.ramps for p in parts]))
-
-
-def boundary_edges(triangles: np.ndarray) -> np.ndarray:
-    """(m, 2) the edges that belong to one triangle only."""
-    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
-    return key[first[counts == 1]]
 
 
 def group_of_vertices(grips: list[Grip], n: int) -> np.ndarray:
