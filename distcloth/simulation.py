@@ -136,7 +136,8 @@ class Simulation:
             self.system = LinearSystem(lay, self.pattern, comm, self.solver_choice.mat_type,
                                        self.solver_choice.warm_start, ls.pc_rebuild_every)
         self.pipeline = self._build_pipeline()
-        self.ctx = StepContext(self.n_owned, self.mass, self.terms, self.pipeline, self.ghosts, comm)
+        self.ctx = StepContext(self.n_owned, self.mass, self.terms, self.pipeline, self.ghosts, comm,
+                               barrier=self.contact.barrier)
         tc = cfg.time
         # stitch springs shortening do work on the garment: a sewing scene is
         # driven until its seams are welded (the welded simulation is passive)
@@ -183,6 +184,8 @@ class Simulation:
                     terms.append(term)
         if self.contact.friction_term is not None:
             terms.append(self.contact.friction_term)
+        if self.contact.barrier is not None:
+            terms.append(self.contact.barrier)
         return terms
 
     def _build_pipeline(self) -> Pipeline:
@@ -329,8 +332,9 @@ class Simulation:
         return assemble_blocks(self.pattern, self.mass[: self.n_owned], self.terms, alpha, beta,
                                gamma)
 
-    def _solve(self, data, rhs, cons, guess=None):
-        y, info = solve_constrained(self.system, self.pattern, data, rhs, cons, guess)
+    def _solve(self, data, rhs, cons, guess=None, rtol=None):
+        with self._tolerance(rtol):
+            y, info = solve_constrained(self.system, self.pattern, data, rhs, cons, guess)
         if self.contact.has_bodies:   # the same on every rank: the exchange is collective
             dv = np.zeros((self.n_local, 3))
             dv[: self.n_owned] = y
@@ -532,7 +536,11 @@ class Simulation:
         if loose is not None and (self.system.rtol >= loose or state.contact_changes == 0):
             loose = None
         changes, iterations = 0, 0
-        passes = (MAX_CONTACT_PASSES + (loose is not None)) if contact.has_bodies else 1
+        # a barrier has no contact set to revise: one Newton solve
+        revised_contacts = contact.has_bodies and contact.barrier is None
+        if not revised_contacts:
+            loose = None
+        passes = (MAX_CONTACT_PASSES + (loose is not None)) if revised_contacts else 1
         detect = True
         for k in range(passes):
             if contact.has_bodies and detect:
@@ -555,7 +563,7 @@ class Simulation:
             if agreed is not None:
                 where = f" (rank {agreed[0]})" if self.comm.size > 1 and not solver_failure else ""
                 return None, agreed[1] + where, not solver_failure
-            if not contact.has_bodies:
+            if not revised_contacts:
                 break
             # an adhesive contact, or a vertex the prediction missed that ends the
             # step inside a body: solve the step again with the revised contacts

@@ -53,7 +53,8 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage("collision:bodies", "colliders and the collisions effect",
           "x, v, colliders at t, contacts the attempt released or missed", "contacts",
           "vertices predicted to end a step of free flight within the contact distance of a "
-          "body, or of the garments worn under theirs, become unilateral contacts"),
+          "body, or of the garments worn under theirs, become unilateral contacts (with "
+          "contact.model barrier: only the time at which the barrier sees the bodies)"),
     Stage("constraints", "always", "held vertices, contacts, v", "constraints (S, z)",
           "pins, sliding pins and contacts as per-vertex projections S and velocity changes z"),
     Stage("force:gravity", "effect gravity", "vertex masses", "forces",
@@ -81,6 +82,10 @@ STEP_STAGES: tuple[Stage, ...] = (
     Stage("force:friction", "an implicit integrator and a collider with friction",
           "contacts, v, the other forces at the start state", "forces, damping blocks",
           "Coulomb friction of body contacts as a force of the solve"),
+    Stage("force:contact", "contact.model barrier, an implicit integrator and colliders",
+          "x, v, colliders at the end of the step", "forces, stiffness and damping blocks",
+          "the barrier energy of each vertex's gap to the bodies and its lagged friction, "
+          "inside the step's Newton solve"),
     Stage("assembly", "implicit integrators", "stiffness and damping blocks, masses",
           "block values of A = M - beta df/dv - alpha df/dx",
           "the owned rows' 3x3 blocks in the pattern built once"),

@@ -15,8 +15,10 @@ from .stages import FORCE_STAGES
 
 
 class StepContext:
-    def __init__(self, n_owned: int, mass: np.ndarray, terms, pipeline, ghosts, comm):
+    def __init__(self, n_owned: int, mass: np.ndarray, terms, pipeline, ghosts, comm,
+                 barrier=None):
         self.n_owned = n_owned
+        self.barrier = barrier           # body contact as a barrier term, or None
         self.n_local = mass.shape[0]
         self.mass = mass                 # (n_local,) lumped vertex masses
         self.terms = terms
@@ -41,6 +43,24 @@ class StepContext:
             if hasattr(t, "at_step_start"):
                 t.at_step_start(x0)
 
+    def potential(self, x, v, position_weight: float, velocity_weight: float) -> float:
+        """Over the ranks: position_weight times the terms' potential energy at
+        x plus velocity_weight times their dissipation potentials at v (the
+        parts of a step's incremental potential the forces are gradients of)."""
+        local = 0.0
+        for t in self.terms:
+            if self.pipeline.enabled(t.name):
+                local += position_weight * t.energy(x) + velocity_weight * t.dissipation(x, v)
+        return float(self.global_sum(local)[0])
+
+    def contact_step_bound(self, x, dx) -> float:
+        """The largest fraction <= 1 of the move dx (owned rows) that keeps every
+        vertex outside its contact distance, over the ranks (1 without a barrier)."""
+        if self.barrier is None:
+            return 1.0
+        local = float(np.min(self.barrier.step_bound(x, dx), initial=1.0))
+        return -float(self.global_max(-local)[0])
+
     def stiffness_product(self, w) -> np.ndarray:
         """(df/dx) w at the last evaluation, on every local row."""
         out = np.zeros((self.n_local, 3))
@@ -53,10 +73,11 @@ class StepContext:
         """Block values of A = gamma M - beta df/dv - alpha df/dx (owned rows)."""
         return self.pipeline.run("assembly", alpha, beta, gamma)
 
-    def solve(self, data, rhs, cons, guess=None):
+    def solve(self, data, rhs, cons, guess=None, rtol=None):
         """(dv on the owned rows, solve info) of A dv = rhs under the constraints,
-        the iteration started from ``guess`` (owned rows) if given."""
-        return self.pipeline.run("solve", data, rhs, cons, guess)
+        the iteration started from ``guess`` (owned rows) if given; ``rtol``:
+        a looser relative tolerance for this solve (an inexact Newton step)."""
+        return self.pipeline.run("solve", data, rhs, cons, guess, rtol)
 
     def local_array(self, owned_rows: np.ndarray) -> np.ndarray:
         """(n_local, k): the owned rows with their ghost copies filled in."""

@@ -65,7 +65,11 @@ SWEEP = {
                                     ("backward_euler", (0.005, 0.01, 0.02))) for h in steps]
                   + [{"integrator": "bdf2", "step": h, "ksp_rtol": None, "newton": k}
                      for k, steps in ((2, (0.005, 0.01)), (4, (0.005, 0.01, 0.02)))
-                     for h in steps]),
+                     for h in steps]
+                  # S2 only: contact as a barrier, the large steps it takes
+                  # (docs/collisions.md, "Contact as a barrier")
+                  + [{"integrator": "backward_euler", "step": h, "ksp_rtol": None, "newton": 1,
+                      "contact": "barrier"} for h in (0.02, 1.0 / 30.0)]),
 }
 REFERENCE = {"blender": {"quality": 160}, "newton": {"substeps": 20},
              "distcloth": {"integrator": "bdf2", "step": 0.001, "ksp_rtol": 1e-8, "newton": 1}}
@@ -78,7 +82,8 @@ def setting_key(tool: str, s: dict) -> str:
         return f"s{s['substeps']}"
     rtol = "default" if s["ksp_rtol"] is None else f"{s['ksp_rtol']:g}"
     newton = "" if s["newton"] == 1 else f"_newton{s['newton']}"
-    return f"{s['integrator']}_{1e3 * s['step']:g}ms_rtol{rtol}{newton}"
+    contact = f"_{s['contact']}" if s.get("contact") else ""
+    return f"{s['integrator']}_{1e3 * s['step']:g}ms_rtol{rtol}{newton}{contact}"
 
 
 def setting_label(tool: str, s: dict) -> str:
@@ -89,7 +94,8 @@ def setting_label(tool: str, s: dict) -> str:
     name = {"bdf2": "BDF-2", "backward_euler": "backward Euler"}[s["integrator"]]
     rtol = "default rtol" if s["ksp_rtol"] is None else f"rtol {s['ksp_rtol']:g}"
     newton = "" if s["newton"] == 1 else f", Newton <= {s['newton']} its"
-    return f"{name} {1e3 * s['step']:g} ms, {rtol}{newton}"
+    contact = f", contact as a {s['contact']}" if s.get("contact") else ""
+    return f"{name} {1e3 * s['step']:.3g} ms, {rtol}{newton}{contact}"
 
 
 def steps_per_sim_s(tool: str, s: dict) -> float:
@@ -228,6 +234,8 @@ def run_distcloth(a, scene: str, s: dict, npz: Path) -> dict:
            *([] if s["ksp_rtol"] is None else ["--set", f"solver.ksp_rtol={s['ksp_rtol']}"]),
            *([] if s["newton"] == 1 else ["--set", f"time.newton_iterations={s['newton']}",
                                           "--set", "time.newton_tolerance=1e-4"]),
+           *(["--set", f"contact.model={s['contact']}"] if s.get("contact") else []),
+           *(["--set", "output.every=0.1"] if s["step"] > 0.02 else []),
            "--output", str(h5), "--overwrite", "--quiet"]
     code, wall, text = _run(cmd, npz.with_suffix(".log"))
     if not h5.exists() or not timing.exists():
@@ -316,7 +324,9 @@ def sweep(a, scene: str) -> None:
     refs = {tool: reference(a, scene, tool) for tool in a.tools}
     if a.references_only:
         return
-    lists = [[(tool, s) for s in SWEEP[tool]] for tool in a.tools]
+    contact = SCENES[scene][0] == "S2"       # the only scene with bodies
+    lists = [[(tool, s) for s in SWEEP[tool] if contact or not s.get("contact")]
+             for tool in a.tools]
     for r in range(a.repeats):
         for group in itertools.zip_longest(*lists):      # A, B, C, A, B, C, ...
             for item in group:

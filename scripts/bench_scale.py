@@ -69,7 +69,8 @@ def solver_settings(smooths: int = 1):
             {"mat_type": mat_type})
 
 
-def scene(n: int, gap: float, step: float, out: str, every: int, smooths: int = 1) -> dict:
+def scene(n: int, gap: float, step: float, out: str, every: int, smooths: int = 1,
+          contact: str = "constraints") -> dict:
     """The tablecloth scene at N x N with the overrides above (a raw mapping)."""
     from distcloth.config.load import read_scene_file
     raw = read_scene_file(str(SCENE))
@@ -82,6 +83,7 @@ def scene(n: int, gap: float, step: float, out: str, every: int, smooths: int = 
     raw["linear_system"] = linear_system
     raw["time"] = {**raw["time"], "step": step, "end": 10.0}
     raw["output"] = {"file": out, "every": every * step, "preview": False}
+    raw["contact"] = {"model": contact}
     return raw
 
 
@@ -119,8 +121,8 @@ def worker(args):
         if os.path.exists(out):
             os.remove(out)
     comm.synchronize()
-    cfg = config_from_dict(scene(args.n, args.gap, args.step, out, args.every, args.smooths),
-                           str(SCENE.parent), str(SCENE))
+    cfg = config_from_dict(scene(args.n, args.gap, args.step, out, args.every, args.smooths,
+                                 args.contact), str(SCENE.parent), str(SCENE))
     mem = {"start": memory()}
     t0 = time.perf_counter()
     model = build_model(cfg)
@@ -261,6 +263,8 @@ def main():
     ap.add_argument("--smooths", type=int, default=1,
                     help="GAMG prolongator smoothing steps (pc_gamg_agg_nsmooths; the preset's: 1)")
     ap.add_argument("--every", type=int, default=5, help="a frame every so many steps")
+    ap.add_argument("--contact", choices=("constraints", "barrier"), default="constraints",
+                    help="contact.model (docs/collisions.md)")
     args = ap.parse_args()
     if args.worker:
         worker(args)
@@ -270,7 +274,8 @@ def main():
         cmd = [str(ROOT / "scripts" / "mpiexec.sh"), str(args.ranks), sys.executable, __file__,
                "--worker", "--n", str(n), "--steps", str(args.steps), "--warmup",
                str(args.warmup), "--gap", str(args.gap), "--step", str(args.step),
-               "--every", str(args.every), "--smooths", str(args.smooths)] + ["--profile"] * args.profile + [f"--petsc={args.petsc}"]
+               "--every", str(args.every), "--smooths", str(args.smooths),
+               "--contact", args.contact] + ["--profile"] * args.profile + [f"--petsc={args.petsc}"]
         t0 = time.perf_counter()
         os.makedirs("/tmp/scale", exist_ok=True)
         stdout, stderr, peak_total, killed = run_watched(cmd, args.max_gib * 2 ** 30,

@@ -202,7 +202,7 @@ ERRORS = [
      f"time.stepp: 0.01 — unknown key (did you mean step?); allowed keys: {TIME_KEYS}"),
     ("colour", "red", "colour: 'red' — unknown key; allowed keys: scene, cloth, effects, "
                       "gravity, drag, time, solver, linear_system, output, drape, "
-                      "colliders, work_stealing, strain_limiting, garment"),
+                      "contact, colliders, work_stealing, strain_limiting, garment"),
     ("time.step", "fast", "time.step: 'fast' — a finite number > 0"),
     ("time.step", 2.0, "time.step: 2.0 — a number > 0 and <= time.end (1)"),
     ("time.end", float("inf"), "time.end: inf — a finite number > 0"),
@@ -372,7 +372,7 @@ OVERRIDE_ERRORS = [
     ("time.stepp=0.1", f"time.stepp: 0.1 — {TIME_ALLOWED}"),
     ("nosuch.key=1", "nosuch.key: 1 — no such key; allowed under the top level: scene, cloth, "
                      "effects, gravity, drag, time, solver, linear_system, output, drape, "
-                     "colliders, work_stealing, strain_limiting, garment"),
+                     "contact, colliders, work_stealing, strain_limiting, garment"),
     ("cloth.2.name=x", "cloth.2.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.first.name=x", "cloth.first.name: 'x' — an index 0 <= i < 2: cloth has 2 element(s)"),
     ("cloth.0.pins.0.edge=top", "cloth.0.pins.0.edge: 'top' — cloth.0.pins is not in the "
@@ -402,7 +402,7 @@ def test_bad_overrides_name_their_path(scene_dir, override, expected):
 
 
 NOT_A_MAPPING = ("null — a YAML mapping with keys scene, cloth, effects, gravity, drag, time, "
-                 "solver, linear_system, output, drape, colliders, work_stealing, strain_limiting, garment")
+                 "solver, linear_system, output, drape, contact, colliders, work_stealing, strain_limiting, garment")
 
 
 @pytest.mark.parametrize("text, expected", [

@@ -50,6 +50,7 @@ import numpy as np
 
 from ..parallel.collide import build_collisions
 from ..config.schema import ConfigError
+from ..physics.contact_barrier import BarrierContactTerm
 from ..physics.contact_friction import ContactFrictionTerm
 from .colliders import (AnalyticCollider, Box, Capsule, MeshCollider, Plane, RigidMotion,
                         Sphere, load_collider_mesh)
@@ -234,7 +235,12 @@ class ContactModel:
         self.gravity_norm = float(np.linalg.norm(self.gravity))
         # friction as a force of the solve: the colliders whose law says so
         self.friction_term = None
-        if any(c.law == IN_SOLVE and c.friction > 0.0 for c in self.colliders):
+        # contact as a barrier energy of the step (physics/contact_barrier.py)
+        # replaces detection, constraints, passes and in-solve friction
+        self.barrier = None
+        if cfg.contact.model == "barrier" and implicit and self.colliders:
+            self.barrier = self._barrier_term(cfg.contact, mass)
+        elif any(c.law == IN_SOLVE and c.friction > 0.0 for c in self.colliders):
             self.friction_term = ContactFrictionTerm(mass, self.n_owned)
         self.pipeline_meshes = [c.mesh for c in self.colliders if c.mesh is not None]
         self.detector = None
@@ -282,9 +288,21 @@ class ContactModel:
         # have the layers under each outer garment (layers.py)
         self.bodies = list(self.colliders)
         self.layer_surfaces = []
-        if self.self_collision and self.pipeline_priority is not None:
+        if self.self_collision and self.pipeline_priority is not None and self.barrier is None:
             self._add_layer_surfaces(model, layout, implicit)
         self.in_solve = np.array([c.law == IN_SOLVE for c in self.colliders] + [False], dtype=bool)
+
+    def _barrier_term(self, spec, mass) -> BarrierContactTerm:
+        """The scene's bodies as a barrier of the step, each vertex's contact
+        distance d = cloth + collider thickness; width null: half the largest d."""
+        offsets = np.array([self.cloth_thickness + c.thickness for c in self.colliders])
+        width = spec.barrier_width
+        if width is None:
+            width = 0.5 * float(np.max(offsets, initial=0.0))
+        return BarrierContactTerm([c.query for c in self.colliders], offsets,
+                                  [c.friction for c in self.colliders], self.never_contact, mass,
+                                  self.n_owned, width, spec.barrier_stiffness, self.gravity_norm,
+                                  spec.static_speed)
 
     def _add_layer_surfaces(self, model, layout, implicit: bool) -> None:
         """A collider per outer layer: the garments under it, with the
@@ -389,6 +407,9 @@ class ContactModel:
         ghosts), by the unilateral rule of response.py; ``revision``: what the
         attempt's earlier solves showed (contacts released as adhesive,
         contacts missed)."""
+        if self.barrier is not None:     # no contact set: the barrier sees the bodies at t + h
+            self.barrier.begin_step(state.t + h)
+            return Contacts.none()
         x, v = state.x, state.v
         if revision is None:
             self.place_layers(x, v, state.t)
@@ -493,6 +514,8 @@ class ContactModel:
         x_new, v_new = result.x.copy(), result.v.copy()
         gain = result.position_gain
         report = ContactReport()
+        if self.barrier is not None:      # the vertices the barrier acts on at the step's end
+            report.contacts = self.barrier.touching(result.x)
         if contacts is not None:
             mine = contacts.index < n
             idx = contacts.index[mine]

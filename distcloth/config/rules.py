@@ -19,6 +19,7 @@ from .walk import Context, Rules, read_field, required_text
 PER_TIME = ("translations", "rotations")     # MotionSpec keys with one entry per time
 # time.end / time.step may miss a whole number by floating-point rounding only
 STEP_MULTIPLE_TOLERANCE = 1e-6
+BARRIER_INTEGRATORS = ("backward_euler", "bdf2")
 
 
 def _selector(pin, section: dict, key: str, ctx: Context):
@@ -297,6 +298,8 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
         raise ConfigError("effects", list(config.effects),
                           "the loads effect needs at least one entry under cloth.<i>.loads")
     _unique_names(config.colliders, "colliders", "collider")
+    if config.contact.model == "barrier" and "collisions" in config.effects:
+        _barrier_scene(config)
     _garment_pieces(config)
     config = _follow_skin(config)
     if config.time.linearise_at is None:
@@ -307,6 +310,26 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
         config = replace(config, time=replace(config.time,
                                               linearise_at="start" if contact else "predictor"))
     return _default_grid_bending(config)
+
+
+def _barrier_scene(config: SceneConfig) -> None:
+    """The barrier's Newton solve minimises the step's incremental potential:
+    backward Euler's and BDF-2's (the other schemes' residuals are not its
+    gradient); the bodies must answer distances (not image maps), and the
+    contact distance must be positive for a default width."""
+    if config.time.integrator not in BARRIER_INTEGRATORS:
+        raise ConfigError("time.integrator", config.time.integrator,
+                          "backward_euler or bdf2 with contact.model: barrier")
+    for i, spec in enumerate(config.colliders):
+        if spec.shape == "mesh" and spec.method == "image":
+            raise ConfigError(f"colliders.{i}.method", "image",
+                              "bvh with contact.model: barrier (image maps give no distance "
+                              "field to a Newton iterate)")
+    if config.contact.barrier_width is None:
+        d = max(s.thickness for s in config.cloth) + max(c.thickness for c in config.colliders)
+        if d <= 0.0:
+            raise ConfigError("contact.barrier_width", None, "a width in m > 0 (the cloth and "
+                              "colliders have no thickness to take half of)")
 
 
 def _follow_skin(config: SceneConfig) -> SceneConfig:

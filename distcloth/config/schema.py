@@ -43,6 +43,7 @@ BENDING_MODELS = ("flexion", "grid_lines", "dihedral", "isometric", "dihedral_sh
 MAT_TYPES = ("baij", "aij")
 LINEARISATION_POINTS = ("predictor", "start")
 DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
+CONTACT_MODELS = ("constraints", "barrier")   # body contact in an implicit step
 DRAPE_STOP_ON = ("potential", "kinetic", "both")
 DRAPE_CRITERIA = ("force", "motion")
 MAX_NEWTON_ITERATIONS = 100
@@ -715,6 +716,34 @@ class DrapeSpec:
 
 
 @dataclass(frozen=True)
+class ContactSpec:
+    """How body contact enters an implicit step (collisions effect;
+    docs/collisions.md, "Contact as a barrier")."""
+    model: str = choice("constraints", CONTACT_MODELS, doc="constraints: vertices predicted to "
+                        "reach a body become Baraff-Witkin constraints, revised over up to four "
+                        "solves, with a position fail-safe after the step; barrier: a barrier "
+                        "energy of the gap to each body and a lagged friction dissipation in a "
+                        "Newton solve with a line search that never lets a vertex reach its "
+                        "contact distance (incremental potential contact, Li et al. 2020); "
+                        "needs backward_euler or bdf2 and colliders that are not image maps")
+    barrier_width: float | None = setting(None, doc="barrier: the gap above the contact "
+                                          "distance d over which the barrier acts; null: half "
+                                          "the largest d", unit="m", above=0)
+    barrier_stiffness: float = setting(10.0, doc="barrier: the force it exerts at half its "
+                                       "width, in weights of the vertex", above=0)
+    static_speed: float = setting(1.0e-3, doc="barrier: the slip speed below which friction "
+                                  "holds a vertex as stuck (IPC's smoothing eps_v)", unit="m/s",
+                                  above=0)
+    newton_iterations: int = setting(50, doc="barrier: Newton iterations per step at most",
+                                     at_least=1, at_most=MAX_NEWTON_ITERATIONS)
+    velocity_tolerance: float = setting(0.1, doc="barrier: Newton stops when its update "
+                                        "changes no velocity by more than this (0.1: on the "
+                                        "tablecloth landing on a sphere at 20 ms, 4 times "
+                                        "faster than 0.01 for 6 % more error; 0.3 gave 70 % "
+                                        "more; docs/collisions.md)", unit="m/s", above=0)
+
+
+@dataclass(frozen=True)
 class StrainLimitSpec:
     """The strain_limiting effect (docs/strain_limiting.md): after each step
     every structural and shear spring is brought back within its bound, the
@@ -813,6 +842,8 @@ class SceneConfig:
                                               "of the linear solve")
     output: OutputSpec = section(OutputSpec, doc="the result file")
     drape: DrapeSpec = section(DrapeSpec, doc="relaxation by distcloth drape")
+    contact: ContactSpec = section(ContactSpec, doc="how body contact enters an implicit "
+                                   "step")
     colliders: tuple[ColliderSpec, ...] = setting((), doc="bodies the cloth collides with",
                                                   what="colliders, each a mapping with name "
                                                   "and shape")

@@ -20,6 +20,10 @@ communicator:
   A = M - beta df/dv - alpha df/dx to the block values;
 * ``energy(x)``: its potential energy only (0 for dissipative terms),
   weighted so that the ranks' sums add up to the global value once;
+* ``dissipation(x, v)``: a dissipative term's potential R with force
+  -dR/dv (Rayleigh's, 0 for the rest), weighted alike: the barrier
+  contact's Newton line search (integrate/implicit.py) adds it to the step's
+  incremental potential;
 * ``max_strain(x)``: its largest engineering strain (stretch - 1) at x, 0 for
   terms that do not stretch the membrane.
 """
@@ -58,6 +62,9 @@ class ForceTerm:
         pass
 
     def energy(self, x):
+        return 0.0
+
+    def dissipation(self, x, v):
         return 0.0
 
     def max_strain(self, x):
@@ -104,6 +111,9 @@ class TermSum(ForceTerm):
 
     def energy(self, x):
         return sum(part.energy(x) for part in self.parts)
+
+    def dissipation(self, x, v):
+        return sum(part.dissipation(x, v) for part in self.parts)
 
     def max_strain(self, x):
         return max((part.max_strain(x) for part in self.parts), default=0.0)

@@ -76,9 +76,10 @@ class SpringTerm(_SpringSet):
 class SpringDampingTerm(_SpringSet):
     """Damping along every spring on the relative velocity of its ends."""
 
-    def __init__(self, springs, rest, damping):
+    def __init__(self, springs, rest, damping, weight=None):
         super().__init__("force:damping", springs, rest)
         self.c = np.ascontiguousarray(damping, dtype=np.float64)
+        self.weight = np.ones_like(self.c) if weight is None else np.asarray(weight, float)
         self._mask = np.zeros(self.springs.shape[0], dtype=np.bool_)
 
     def evaluate(self, x, v, force, want_jac):
@@ -88,6 +89,13 @@ class SpringDampingTerm(_SpringSet):
 
     def add_to_system(self, data, alpha, beta):
         sk.add_spring_blocks(self.hess, self.unit, self.c, 0.0, beta, self.slots, data)
+
+    def dissipation(self, x, v):
+        """Rayleigh's R = c (u . (v_i - v_j))^2 / 2 per spring, u its unit vector."""
+        i, j = self.springs[:, 0], self.springs[:, 1]
+        d = x[i] - x[j]
+        vr = np.einsum("ij,ij->i", d, v[i] - v[j]) / np.linalg.norm(d, axis=1)
+        return float(0.5 * np.sum(self.weight * self.c * vr * vr))
 
 
 class GravityTerm(ForceTerm):
@@ -119,6 +127,10 @@ class DragTerm(ForceTerm):
 
     def evaluate(self, x, v, force, want_jac):
         force -= self.coef[:, None] * v
+
+    def dissipation(self, x, v):
+        n = self.n_owned
+        return float(0.5 * np.sum(self.coef[:n] * np.einsum("ij,ij->i", v[:n], v[:n])))
 
     def add_to_system(self, data, alpha, beta):
         d = beta * self.coef[: self.n_owned]
@@ -180,7 +192,8 @@ def build_bending(cfg, model, layout) -> ForceTerm:
 def build_damping(cfg, model, layout) -> ForceTerm:
     springs = LocalSprings(model, layout)
     sel = springs.damping > 0.0
-    return SpringDampingTerm(springs.ends[sel], springs.rest[sel], springs.damping[sel])
+    return SpringDampingTerm(springs.ends[sel], springs.rest[sel], springs.damping[sel],
+                             springs.weight[sel])
 
 
 def build_drag(cfg, model, layout) -> ForceTerm | None:
