@@ -171,15 +171,16 @@ def test_the_stiff_tablecloth_lands_on_the_sphere_with_20_ms_steps():
     # (docs/integrators.md); with the barrier it runs with the guard on
     sim = make_sim(_sphere_scene(15, 0.02, 0.8), comm=MPI.COMM_WORLD)
     e0 = sum(sim.energies())
-    closest, highest = np.inf, -np.inf
+    closest, highest, touching = np.inf, -np.inf, 0.0
     for _ in range(40):
-        sim.step()
+        touching = max(touching, sim.step()["contacts"])
         closest = min(closest, float(np.min(_gaps(gather_positions(sim)))))
         highest = max(highest, sum(sim.energies()) - e0)
     rejected = sim.state.rejections
     z = gather_positions(sim)[:, 2]
     sim.destroy()
     assert rejected == 0
+    assert touching > 20                  # the diagnostics count the vertices in the band
     assert closest > 0.0                  # never within the contact distance
     assert highest <= 1e-3                # backward Euler, converged: only loses energy
     assert np.min(z) < 0.2                # draped over the sphere, below its equator

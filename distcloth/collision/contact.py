@@ -516,7 +516,7 @@ class ContactModel:
         report = ContactReport()
         if self.barrier is not None:      # the vertices the barrier acts on at the step's end
             report.contacts = self.barrier.touching(result.x)
-        if contacts is not None:
+        elif contacts is not None:
             mine = contacts.index < n
             idx = contacts.index[mine]
             report.contacts = int(idx.size)

@@ -302,7 +302,10 @@ class ImplicitScheme(Integrator):
             # inexact Newton (Eisenstat and Walker 1996): the linear solve need
             # only be as accurate as the residual is small
             forcing = min(MAX_FORCING, rel) if newton_its else MAX_FORCING
-            delta, info = ctx.solve(data, -g, left, rtol=forcing)
+            # a multigrid set-up costs several solves at 100k vertices: the
+            # step's later iterations keep the first one's, as contact passes do
+            delta, info = ctx.solve(data, -g, left, rtol=forcing,
+                                    keep_preconditioner=newton_its > 0)
             newton_its += 1
             ksp_its += info.iterations
             ksp_res = max(ksp_res, info.residual)
