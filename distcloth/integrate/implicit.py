@@ -239,7 +239,6 @@ class ImplicitScheme(Integrator):
                           ksp_iterations=ksp_its, ksp_residual=ksp_res, newton_residual=rel,
                           newton_converged=converged)
 
-
     def _barrier_step(self, ctx, state, h, cons):
         """Newton on the step's incremental potential with body contact as a
         barrier (physics/contact_barrier.py; IPC, Li et al. 2020 §4):
@@ -340,7 +339,6 @@ def _outside(barrier, x):
     contact distance of a body (a body that moved onto it, a correction after
     the last step) put half the barrier's width outside it along the normal."""
     out = x.copy()
-    n = barrier.n_owned
     for s, normal, _ in barrier.gaps(x):
         rows = np.nonzero(barrier.free & (s <= BARRIER_START_GAP * barrier.width))[0]
         out[rows] += (0.5 * barrier.width - s[rows])[:, None] * normal[rows]

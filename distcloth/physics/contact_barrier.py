@@ -127,14 +127,13 @@ class BarrierContactTerm(ForceTerm):
         self.t = float(t_end)
         self.lagged = None
 
-    def gaps(self, x, max_distance=None):
+    def gaps(self, x):
         """Per body: (s, normal, velocity) of the owned rows at x (s = phi - d,
-        +inf where a mesh body is farther than ``max_distance``)."""
+        +inf where a mesh body is farther than ``reach``)."""
         n = self.n_owned
-        reach = self.reach if max_distance is None else max_distance
         out = []
         for j, query in enumerate(self.queries):
-            phi, normal, vel = query(x[:n], self.t, reach)
+            phi, normal, vel = query(x[:n], self.t, self.reach)
             out.append((phi - self.offsets[j, :n], normal, vel))
         return out
 
