@@ -157,7 +157,8 @@ class BarrierContactTerm(ForceTerm):
         n = self.n_owned
         blocks = np.zeros((n, 3, 3)) if want_jac else None
         damp = np.zeros((n, 3, 3)) if want_jac else None
-        for s, normal, _ in self.gaps(x):
+        gaps = self.gaps(x)
+        for s, normal, _ in gaps:
             rows = np.nonzero(self.free & (s < self.width))[0]
             if rows.size == 0:
                 continue
@@ -180,14 +181,19 @@ class BarrierContactTerm(ForceTerm):
             if want_jac:
                 damp[rows] += c[:, None, None] * P
         if want_jac:
-            self._blocks = (blocks, damp)
+            # the band's rows at x and the friction's, lagged at an earlier iterate
+            touched = np.unique(np.concatenate(
+                [np.nonzero(self.free & (s < self.width))[0] for s, _, _ in gaps]
+                + [lag[0] for lag in self.lagged or ()] + [np.zeros(0, np.int64)]))
+            self._blocks = (blocks, damp, touched)
 
     def add_to_system(self, data, alpha, beta):
-        # A = M - beta df/dv - alpha df/dx: both blocks are -df on the diagonal
+        # A = M - beta df/dv - alpha df/dx: both blocks are -df on the diagonal;
+        # only the rows in the barrier's band have any (one diagonal slot a row)
         if self._blocks is None:
             return
-        stiff, damp = self._blocks
-        np.add.at(data, self.diag_slots[np.arange(self.n_owned)], alpha * stiff + beta * damp)
+        stiff, damp, rows = self._blocks
+        data[self.diag_slots[rows]] += alpha * stiff[rows] + beta * damp[rows]
 
     def stiffness_product(self, w, out):
         if self._blocks is not None:
