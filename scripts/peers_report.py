@@ -30,7 +30,11 @@ tool's own converged reference** (Blender quality 160, Newton 20 substeps,
 distcloth BDF-2 at 1 ms with ksp_rtol 1e-8).  Errors therefore measure how far
 each tool's cheap settings are from what that tool converges to, not whether
 the tools agree with each other; the physical figures (stretch, lowest point,
-gap to the sphere) show the latter.
+gap to the sphere) show the latter.  On S2, distcloth's settings with contact
+as a barrier (`contact.model: barrier`, docs/collisions.md) are a different
+contact model that converges to its own solution: they are measured against
+its converged run (the same BDF-2 at 1 ms, Newton to 1 mm/s), and their
+distance to the constraints' reference is given in brackets.
 
 **Scene settings** (`configs/bench/*.yaml`, and why):
 - vertex order `j*n + i`, x fastest, the whole edge x = 0 pinned (S1), as the harness;
@@ -78,9 +82,9 @@ def _load(out: Path):
     runs = defaultdict(list)
     for rec in _records(out / "runs"):
         runs[(rec["scene"], rec["tool"], rec["key"])].append(rec)
-    refs = {}
+    refs = defaultdict(list)
     for rec in _records(out / "ref"):
-        refs[(rec["scene"], rec["tool"])] = rec
+        refs[(rec["scene"], rec["tool"])].append(rec)
     return runs, refs
 
 
@@ -97,6 +101,7 @@ def _summary(recs):
         row["process"] = statistics.median(r["process_per_sim_s"] for r in ok)
         row["error"] = first.get("error_m")
         row["error_at"] = first.get("error_at_m")
+        row["error_other"] = first.get("error_constraints_m")
         row["figures"] = first["figures"]
     return row
 
@@ -122,7 +127,8 @@ def _row(row, scene, width):
     cells = [row["tool"], row["label"], f"{row['steps']:g}",
              f"{row['wall']:.2f}" + (f" ({walls})" if len(row["walls"]) > 1 else ""),
              f"{row['process']:.2f}" if row["tool"] == "distcloth" else "",
-             _mm(row["error"]), " / ".join(_mm(e) for e in row["error_at"]) if row["error_at"] else "–",
+             _mm(row["error"]) + (f" ({_mm(row['error_other'])})" if row.get("error_other") else ""),
+             " / ".join(_mm(e) for e in row["error_at"]) if row["error_at"] else "–",
              *_figure_cells(row["figures"], scene), f"{row['load']:.2f}", str(row["runs"])]
     return "| " + " | ".join(cells) + " |"
 
@@ -184,7 +190,7 @@ def _plot(scenes_rows, path: Path, note: str):
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 4.4), squeeze=False)
     style = {"blender": ("tab:orange", "s"), "newton": ("tab:green", "^"),
              "bdf2": ("tab:blue", "o"), "backward_euler": ("tab:purple", "D"),
-             "bdf2_newton": ("tab:cyan", "v")}
+             "bdf2_newton": ("tab:cyan", "v"), "barrier": ("tab:red", "P")}
     for ax, scene in zip(axes[0], scenes):
         series = defaultdict(list)
         for r in scenes_rows[scene]:
@@ -193,13 +199,16 @@ def _plot(scenes_rows, path: Path, note: str):
                     if not r["key"].startswith("backward") else "backward_euler"
                 if "_newton" in r["key"]:
                     name += "_newton"
+                if r["key"].endswith("_barrier"):
+                    name = "barrier"
                 series[name].append(r)
         for name, rs in series.items():
             rs.sort(key=lambda r: r["wall"])
             color, marker = style[name]
             label = {"blender": "Blender (quality)", "newton": "Newton VBD (substeps)",
                      "bdf2": "distcloth BDF-2", "backward_euler": "distcloth backward Euler",
-                     "bdf2_newton": "distcloth BDF-2, Newton iterated"}[name]
+                     "bdf2_newton": "distcloth BDF-2, Newton iterated",
+                     "barrier": "distcloth backward Euler, contact as a barrier"}[name]
             ax.loglog([r["wall"] for r in rs], [1e3 * r["error"] for r in rs], marker=marker,
                       color=color, label=label)
             for r in rs:
@@ -219,27 +228,62 @@ def _plot(scenes_rows, path: Path, note: str):
     return True
 
 
+def _kept_sections(page: Path) -> dict:
+    """The scene sections of an earlier page, for scenes whose runs are not
+    in this cache (the runs stay on the machine that made them): kept as
+    they were, marked as such, rather than dropped."""
+    if not page.exists():
+        return {}
+    text = page.read_text().split("\n## Commands")[0]
+    out = {}
+    for scene, title in SCENE_TITLES.items():
+        head = f"## {title}\n"
+        if head not in text:
+            continue
+        body = text.split(head, 1)[1].split("\n## ", 1)[0].rstrip() + "\n"
+        if "Not measured yet" in body:
+            continue
+        note = KEPT_NOTE
+        if body.startswith(note.split(".")[0]):
+            note = ""
+        out[scene] = head + "\n" + note + body.lstrip("\n")
+    return out
+
+
+KEPT_NOTE = ("From an earlier run of this script whose runs are not in this machine's "
+             "cache (out/peers/runs/): kept as that run wrote it, with its load figures.\n\n")
+
+
 def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
     runs, refs = _load(out)
+    kept = _kept_sections(root / "docs" / "peers.md")
     order = {"blender": 0, "newton": 1, "distcloth": 2}
     scenes_rows = defaultdict(list)
     for (scene, tool, key), recs in runs.items():
         scenes_rows[scene].append(_summary(recs))
     loads = [r["load_before"]["load1"] for recs in runs.values() for r in recs]
     text = [INTRO]
+    measured = ", ".join(sc for sc in SCENE_TITLES if scenes_rows.get(sc)) or "none"
     text.append(f"**Machine**: {machine['cpu']}, {machine['cores']} cores, {machine['memory_gib']} GiB, "
-                f"Debian {machine['debian']} ({machine['system']}). 1-minute load average before "
-                f"the runs: {min(loads, default=0):.2f} to {max(loads, default=0):.2f} "
-                f"({machine['cores']} cores; a load above {0.5 * machine['cores']:g} means others "
-                f"were running and the times are not idle-machine figures).\n")
+                f"Debian {machine['debian']} ({machine['system']}). Scenes of this cache's runs: "
+                f"{measured}; 1-minute load average before them: {min(loads, default=0):.2f} to "
+                f"{max(loads, default=0):.2f} ({machine['cores']} cores; a load above "
+                f"{0.5 * machine['cores']:g} means others were running and the times are not "
+                f"idle-machine figures).\n")
     text.append("![error against wall time per simulated second](pictures/peers_pareto.png)\n")
+    plotted = [sc for sc in SCENE_TITLES if scenes_rows.get(sc)]
+    if plotted and any(sc in kept for sc in SCENE_TITLES if sc not in plotted):
+        text.append(f"(The plot shows {', '.join(plotted)}, the scenes of this cache's runs.)\n")
     for scene in ("S1-41", "S1-101", "S2-81"):
         rows = sorted(scenes_rows.get(scene, []), key=lambda r: (order[r["tool"]], -r.get("wall", 0)))
         if not rows:
-            text.append(f"## {SCENE_TITLES[scene]}\n\nNot measured yet: "
-                        f"`.venv/bin/python scripts/bench_peers.py --scenes {scene}`.\n")
+            if scene in kept:
+                text.append(kept[scene])
+            else:
+                text.append(f"## {SCENE_TITLES[scene]}\n\nNot measured yet: "
+                            f"`.venv/bin/python scripts/bench_peers.py --scenes {scene}`.\n")
             continue
-        ref_rows = [refs[(scene, t)] for t in ("blender", "newton", "distcloth") if (scene, t) in refs]
+        ref_rows = [r for t in ("blender", "newton", "distcloth") for r in refs.get((scene, t), [])]
         text.append(f"## {SCENE_TITLES[scene]}\n\n" + _table(scene, rows, ref_rows) + "\n")
         table, best = _ratios(rows)
         text.append("Speed at equal error (each peer setting against the cheapest distcloth "
@@ -248,7 +292,7 @@ def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
             ratio, p, d = best
             text.append(f"Smallest ratio: distcloth {d['label']} is {ratio:.2f}x as fast per simulated "
                         f"second (stepping loop) as {p['tool']} {p['label']} at equal or lower error.\n")
-        missing = [t for t in ("blender", "newton", "distcloth") if (scene, t) not in refs]
+        missing = [t for t in ("blender", "newton", "distcloth") if not refs.get((scene, t))]
         if missing:
             text.append(f"References recorded by an earlier version of the script or not yet run: "
                         f"{', '.join(missing)} (errors use the cached positions under out/peers/ref/).\n")
