@@ -187,7 +187,7 @@ def _plot(scenes_rows, path: Path, note: str):
     scenes = [s for s in scenes_rows if any(r["ok"] and r.get("error") for r in scenes_rows[s])]
     if not scenes:
         return False
-    fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 4.4), squeeze=False)
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 5.4), squeeze=False)
     style = {"blender": ("tab:orange", "s"), "newton": ("tab:green", "^"),
              "bdf2": ("tab:blue", "o"), "backward_euler": ("tab:purple", "D"),
              "bdf2_newton": ("tab:cyan", "v"), "barrier": ("tab:red", "P")}
@@ -219,7 +219,8 @@ def _plot(scenes_rows, path: Path, note: str):
         ax.set_xlabel("wall s per simulated s (stepping loop)")
         ax.set_ylabel("error mm (RMS vs own reference)")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+        # below the axes: inside, it hides points of the lower-left corner
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
     fig.suptitle(note, fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -240,13 +241,13 @@ def _kept_sections(page: Path) -> dict:
         head = f"## {title}\n"
         if head not in text:
             continue
-        body = text.split(head, 1)[1].split("\n## ", 1)[0].rstrip() + "\n"
+        body = text.split(head, 1)[1].split("\n## ", 1)[0].strip() + "\n"
         if "Not measured yet" in body:
             continue
         note = KEPT_NOTE
         if body.startswith(note.split(".")[0]):
             note = ""
-        out[scene] = head + "\n" + note + body.lstrip("\n")
+        out[scene] = head + "\n" + note + body
     return out
 
 
