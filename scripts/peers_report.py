@@ -244,10 +244,7 @@ def _kept_sections(page: Path) -> dict:
         body = text.split(head, 1)[1].split("\n## ", 1)[0].strip() + "\n"
         if "Not measured yet" in body:
             continue
-        note = KEPT_NOTE
-        if body.startswith(note.split(".")[0]):
-            note = ""
-        out[scene] = head + "\n" + note + body
+        out[scene] = head + "\n" + KEPT_NOTE + body.removeprefix(KEPT_NOTE)
     return out
 
 
@@ -264,15 +261,14 @@ def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
         scenes_rows[scene].append(_summary(recs))
     loads = [r["load_before"]["load1"] for recs in runs.values() for r in recs]
     text = [INTRO]
-    measured = ", ".join(sc for sc in SCENE_TITLES if scenes_rows.get(sc)) or "none"
+    plotted = [sc for sc in SCENE_TITLES if scenes_rows.get(sc)]
     text.append(f"**Machine**: {machine['cpu']}, {machine['cores']} cores, {machine['memory_gib']} GiB, "
                 f"Debian {machine['debian']} ({machine['system']}). Scenes of this cache's runs: "
-                f"{measured}; 1-minute load average before them: {min(loads, default=0):.2f} to "
+                f"{', '.join(plotted) or 'none'}; 1-minute load average before them: {min(loads, default=0):.2f} to "
                 f"{max(loads, default=0):.2f} ({machine['cores']} cores; a load above "
                 f"{0.5 * machine['cores']:g} means others were running and the times are not "
                 f"idle-machine figures).\n")
     text.append("![error against wall time per simulated second](pictures/peers_pareto.png)\n")
-    plotted = [sc for sc in SCENE_TITLES if scenes_rows.get(sc)]
     if plotted and any(sc in kept for sc in SCENE_TITLES if sc not in plotted):
         text.append(f"(The plot shows {', '.join(plotted)}, the scenes of this cache's runs.)\n")
     for scene in ("S1-41", "S1-101", "S2-81"):
