@@ -244,7 +244,9 @@ def _kept_sections(page: Path) -> dict:
         body = text.split(head, 1)[1].split("\n## ", 1)[0].strip() + "\n"
         if "Not measured yet" in body:
             continue
-        out[scene] = head + "\n" + KEPT_NOTE + body.removeprefix(KEPT_NOTE)
+        while body.startswith(KEPT_NOTE):       # however many times an earlier page kept it
+            body = body.removeprefix(KEPT_NOTE)
+        out[scene] = head + "\n" + KEPT_NOTE + body
     return out
 
 
