@@ -332,10 +332,12 @@ class Simulation:
         return assemble_blocks(self.pattern, self.mass[: self.n_owned], self.terms, alpha, beta,
                                gamma)
 
-    def _solve(self, data, rhs, cons, guess=None, rtol=None, keep_preconditioner=False):
+    def _solve(self, data, rhs, cons, guess=None, rtol=None, keep_preconditioner=False,
+               correction=False):
         if keep_preconditioner:
             self.system.keep_preconditioner()
-        with self._tolerance(rtol):
+        with self._tolerance(rtol), (self.system.correcting() if correction
+                                     else contextlib.nullcontext()):
             y, info = solve_constrained(self.system, self.pattern, data, rhs, cons, guess)
         if self.contact.has_bodies:   # the same on every rank: the exchange is collective
             dv = np.zeros((self.n_local, 3))

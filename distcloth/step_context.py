@@ -73,13 +73,16 @@ class StepContext:
         """Block values of A = gamma M - beta df/dv - alpha df/dx (owned rows)."""
         return self.pipeline.run("assembly", alpha, beta, gamma)
 
-    def solve(self, data, rhs, cons, guess=None, rtol=None, keep_preconditioner=False):
+    def solve(self, data, rhs, cons, guess=None, rtol=None, keep_preconditioner=False,
+              correction=False):
         """(dv on the owned rows, solve info) of A dv = rhs under the constraints,
         the iteration started from ``guess`` (owned rows) if given; ``rtol``:
         a looser relative tolerance for this solve (an inexact Newton step);
         ``keep_preconditioner``: a multigrid preconditioner is the last solve's
-        (a later Newton iteration of the same step)."""
-        return self.pipeline.run("solve", data, rhs, cons, guess, rtol, keep_preconditioner)
+        (a later Newton iteration of the same step); ``correction``: a Newton
+        correction, started from zero, which leaves the warm start as it was."""
+        return self.pipeline.run("solve", data, rhs, cons, guess, rtol, keep_preconditioner,
+                                 correction)
 
     def local_array(self, owned_rows: np.ndarray) -> np.ndarray:
         """(n_local, k): the owned rows with their ghost copies filled in."""

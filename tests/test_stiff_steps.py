@@ -1,11 +1,14 @@
 """Implicit steps on a stiff membrane: the hanging square of the peer benchmark
 (0.5 m, edge x = 0 pinned, 0.1 kg/m², FE membrane 1000 N/m, gravity), where
 h omega >> 1 at every step used (docs/integrators.md, "Stiff membranes")."""
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 
 from distcloth.inprocess import build_simulation
 from distcloth.integrate.implicit import ImplicitScheme
+from distcloth.linalg.system import LinearSystem
 from distcloth.parallel.comm import Comm
 
 
@@ -103,3 +106,47 @@ def test_bdf2_large_steps_onto_a_sphere_run_with_the_guard_on(bending):
            "output": {"file": "unused.h5", "every": 0.5, "preview": False}}
     _, steps = run(raw, Comm())
     assert len(steps) == 15 and steps[-1]["rejected_steps"] == 0
+
+
+def test_a_newton_correction_leaves_the_warm_start(monkeypatch):
+    # with two Newton iterations a step, each step's first solve must start
+    # from the last step's first solution (the velocity change, a good
+    # start), never from its correction (the small residual's solution,
+    # which cost the first solve a fifth more CG iterations on S1-41); the
+    # correction itself starts from zero.  Compared exactly: the warm start
+    # is a copy of the vector, not a computation
+    seen = []      # (a correction?, y when the solve began, its solution, nonzero start?)
+    solve, correcting = LinearSystem.solve, LinearSystem.correcting
+    flag = {"on": False}
+
+    @contextmanager
+    def flagged(self):
+        with correcting(self):
+            flag["on"] = True
+            try:
+                yield
+            finally:
+                flag["on"] = False
+
+    def logged(self, rhs, guess=None):
+        start = self.y.array.copy()
+        out = solve(self, rhs, guess)
+        seen.append((flag["on"], start, self.y.array.copy(),
+                     self.ksp.getInitialGuessNonzero()))
+        return out
+
+    monkeypatch.setattr(LinearSystem, "correcting", flagged)
+    monkeypatch.setattr(LinearSystem, "solve", logged)
+    raw = hanging_square(11, 0.01, "bdf2", 0.1, ksp_rtol=1e-3, newton_iterations=2)
+    raw["linear_system"] = {"warm_start": True}
+    run(raw, Comm())
+    firsts = [s for s in seen if not s[0]]
+    corrections = [s for s in seen if s[0]]
+    assert len(firsts) == len(corrections) == 10
+    for before, after in zip(firsts, firsts[1:]):
+        np.testing.assert_array_equal(after[1], before[2])
+    # ... and, past the start (a backward Euler step, then BDF-2's first,
+    # whose right-hand sides differ in kind: there the check finds the last
+    # solution no better than zero), the check keeps it
+    assert all(s[3] for s in firsts[3:]), [s[3] for s in firsts]
+    assert not any(c[3] for c in corrections)

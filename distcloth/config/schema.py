@@ -681,7 +681,8 @@ class LinearSystemSpec:
                                   "way (PETSc's GAMG needs aij); null: the size preset's without "
                                   "a solver: section, else baij")
     warm_start: bool | None = setting(None, doc="start each solve from the previous step's "
-                                      "solution; null: on without a solver: section, off with one")
+                                      "solution (a Newton correction from zero); null: on without "
+                                      "a solver: section, off with one")
     pc_rebuild_every: int = setting(1, doc="rebuild the preconditioner every k-th solve, reuse "
                                     "it in between", at_least=1)
 

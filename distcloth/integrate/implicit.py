@@ -201,7 +201,7 @@ class ImplicitScheme(Integrator):
                                               max_its - newton_its):
                     break
                 data = ctx.assemble(alpha=alpha, beta=beta)   # linearised at dv: its last evaluation
-                delta, info = ctx.solve(data, -g, relaxed)
+                delta, info = ctx.solve(data, -g, relaxed, correction=True)
                 ksp_its += info.iterations
                 ksp_res = max(ksp_res, info.residual)
                 newton_its += 1

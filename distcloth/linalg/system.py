@@ -77,8 +77,10 @@ class LinearSystem:
         self.solves = 0
         self._reuse_next = False
         self._reuses = 0        # solves that kept the last preconditioner (tests read it)
+        self._correcting = False
         self.b = A.createVecLeft()
         self.y = A.createVecRight()
+        self._held = None          # the warm start, kept aside while a correction is solved
         self.r = A.createVecLeft()
         self.ksp = PETSc.KSP().create(self.comm)
         self.ksp.setOptionsPrefix(PREFIX)
@@ -120,6 +122,25 @@ class LinearSystem:
         solves' worth of iterations at 100k vertices, block Jacobi's almost
         nothing, so only AMG preconditioners are kept."""
         self._reuse_next = self.ksp.getPC().getType() in ("gamg", "hypre", "ml")
+
+    @contextmanager
+    def correcting(self):
+        """Solves inside are Newton corrections: they start from zero and
+        leave the warm start (the last solution of a step's own solve) as it
+        was.  A correction is a poor start for the next step's velocity
+        change, and the step's solution a poor one for a correction: on the
+        hanging square with two Newton iterations a step, letting the
+        correction be the next warm start cost the step's first solve a
+        fifth more CG iterations."""
+        if self._held is None:
+            self._held = self.y.duplicate()
+        self.y.copy(self._held)
+        self._correcting = True
+        try:
+            yield
+        finally:
+            self._correcting = False
+            self._held.copy(self.y)
 
     @property
     def rtol(self) -> float:
@@ -172,7 +193,7 @@ class LinearSystem:
         if guess is not None:
             with logged("solve:guess"):
                 self.ksp.setInitialGuessNonzero(self._better_than_zero(guess))
-        elif self.warm_start:
+        elif self.warm_start and not self._correcting:
             # the last solution: a good start for the next step's velocity
             # change, a poor one for a Newton correction (whose right-hand side
             # is the small residual): checked like any guess
@@ -209,8 +230,9 @@ class LinearSystem:
         return False
 
     def destroy(self):
-        for obj in (self.ksp, self.A, self.b, self.y, self.r):
-            obj.destroy()
+        for obj in (self.ksp, self.A, self.b, self.y, self.r, self._held):
+            if obj is not None:
+                obj.destroy()
 
 
 def _norms(*vecs) -> list[float]:
