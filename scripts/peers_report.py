@@ -93,7 +93,8 @@ def _summary(recs):
     first = ok[0] if ok else recs[0]
     row = {"tool": first["tool"], "key": first["key"], "label": first["label"],
            "steps": first["steps_per_sim_s"], "ok": bool(ok), "runs": len(recs),
-           "load": max(r["load_before"]["load1"] for r in recs),
+           "setting": first.get("setting", {}),
+        "load": max(r["load_before"]["load1"] for r in recs),
            "message": "" if ok else recs[0].get("message", "")}
     if ok:
         row["wall"] = statistics.median(r["wall_per_sim_s"] for r in ok)
@@ -179,12 +180,68 @@ def _ratios(rows):
     return "\n".join(lines), best
 
 
+def in_use(row) -> bool:
+    """The peer settings their users run (the comparison the speed target
+    names): Blender quality 20 or better, Newton 10 substeps or more."""
+    s = row.get("setting", {})
+    if row["tool"] == "blender":
+        return s.get("quality", 0) >= 20
+    if row["tool"] == "newton":
+        return s.get("substeps", 0) >= 10
+    return False
+
+
+def _target_line(rows) -> str:
+    """Against the peer settings in use: the smallest speed ratio, and the
+    settings no distcloth setting matches in error."""
+    ours = [r for r in rows if r["tool"] == "distcloth" and r["ok"] and r["error"] is not None]
+    peers = [p for p in rows if in_use(p) and p["ok"] and p["error"] is not None]
+    if not peers:
+        return ""
+    ratios, unmatched = [], []
+    for p in peers:
+        match = [d for d in ours if d["error"] <= p["error"]]
+        if match:
+            d = min(match, key=lambda r: r["wall"])
+            ratios.append((p["wall"] / d["wall"], p, d))
+        else:
+            unmatched.append(f"{p['tool']} {p['label']} ({_mm(p['error'])} mm)")
+    text = "Against the peer settings in use (Blender quality 20 or better, Newton 10 substeps or more): "
+    if ratios:
+        ratio, p, d = min(ratios, key=lambda t: t[0])
+        text += (f"smallest ratio {ratio:.2f}x (distcloth {d['label']} against "
+                 f"{p['tool']} {p['label']})")
+    else:
+        text += "no ratio"
+    if unmatched:
+        text += "; no distcloth setting measured reaches the error of " + ", ".join(unmatched)
+    return text + ".\n"
+
+
+def _point_label(row) -> str:
+    """A plotted point's setting, short: q20, s10, 5 ms, BE 33.3 ms, 10 ms N<=4."""
+    s = row.get("setting") or {}
+    if row["tool"] == "blender":
+        return f"q{s.get('quality', '?')}"
+    if row["tool"] == "newton":
+        return f"s{s.get('substeps', '?')}"
+    if "step" not in s:            # a record written before settings were kept
+        return row["key"].split("_rtol")[0].replace("backward_euler_", "BE ").replace("bdf2_", "")
+    text = f"{1e3 * s['step']:.3g} ms"
+    if s.get("integrator") == "backward_euler":
+        text = "BE " + text
+    if s.get("newton", 1) > 1:
+        text += f" N<={s['newton']}"
+    return text
+
+
 def _plot(scenes_rows, path: Path, note: str):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    scenes = [s for s in scenes_rows if any(r["ok"] and r.get("error") for r in scenes_rows[s])]
+    scenes = [s for s in SCENE_TITLES
+              if any(r["ok"] and r.get("error") for r in scenes_rows.get(s, []))]
     if not scenes:
         return False
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.2 * len(scenes), 5.4), squeeze=False)
@@ -212,8 +269,7 @@ def _plot(scenes_rows, path: Path, note: str):
             ax.loglog([r["wall"] for r in rs], [1e3 * r["error"] for r in rs], marker=marker,
                       color=color, label=label)
             for r in rs:
-                ax.annotate(r["key"].split("_rtol")[0].replace("backward_euler_", "BE ")
-                            .replace("bdf2_", ""), (r["wall"], 1e3 * r["error"]), fontsize=7,
+                ax.annotate(_point_label(r), (r["wall"], 1e3 * r["error"]), fontsize=7,
                             xytext=(3, 3), textcoords="offset points")
         ax.set_title(SCENE_TITLES[scene])
         ax.set_xlabel("wall s per simulated s (stepping loop)")
@@ -291,6 +347,9 @@ def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
             ratio, p, d = best
             text.append(f"Smallest ratio: distcloth {d['label']} is {ratio:.2f}x as fast per simulated "
                         f"second (stepping loop) as {p['tool']} {p['label']} at equal or lower error.\n")
+        target = _target_line(rows)
+        if target:
+            text.append(target)
         missing = [t for t in ("blender", "newton", "distcloth") if not refs.get((scene, t))]
         if missing:
             text.append(f"References recorded by an earlier version of the script or not yet run: "
