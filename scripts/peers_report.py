@@ -94,7 +94,7 @@ def _summary(recs):
     row = {"tool": first["tool"], "key": first["key"], "label": first["label"],
            "steps": first["steps_per_sim_s"], "ok": bool(ok), "runs": len(recs),
            "setting": first.get("setting", {}),
-        "load": max(r["load_before"]["load1"] for r in recs),
+           "load": max(r["load_before"]["load1"] for r in recs),
            "message": "" if ok else recs[0].get("message", "")}
     if ok:
         row["wall"] = statistics.median(r["wall_per_sim_s"] for r in ok)
@@ -180,7 +180,7 @@ def _ratios(rows):
     return "\n".join(lines), best
 
 
-def in_use(row) -> bool:
+def _in_use(row) -> bool:
     """The peer settings their users run (the comparison the speed target
     names): Blender quality 20 or better, Newton 10 substeps or more."""
     s = row.get("setting", {})
@@ -195,7 +195,7 @@ def _target_line(rows) -> str:
     """Against the peer settings in use: the smallest speed ratio, and the
     settings no distcloth setting matches in error."""
     ours = [r for r in rows if r["tool"] == "distcloth" and r["ok"] and r["error"] is not None]
-    peers = [p for p in rows if in_use(p) and p["ok"] and p["error"] is not None]
+    peers = [p for p in rows if _in_use(p) and p["ok"] and p["error"] is not None]
     if not peers:
         return ""
     ratios, unmatched = [], []

@@ -26,7 +26,7 @@ def frames_at(path: str, times) -> np.ndarray:
         for want in times:
             i = int(np.argmin(np.abs(t - want)))
             if abs(t[i] - want) > 1e-6:
-                raise SystemExit(f"{path}: no frame at t = {want:g} s (nearest {t[i]:g} s)")
+                raise KeyError(f"{path}: no frame at t = {want:g} s (nearest {t[i]:g} s)")
             out.append(f["frames/positions"][i])
     return np.asarray(out)
 
@@ -37,7 +37,11 @@ def main(argv=None) -> int:
     p.add_argument("b")
     p.add_argument("--times", type=float, nargs="+", default=[0.5, 1.0, 1.5, 2.0])
     a = p.parse_args(argv)
-    A, B = frames_at(a.a, a.times), frames_at(a.b, a.times)
+    try:
+        A, B = frames_at(a.a, a.times), frames_at(a.b, a.times)
+    except (OSError, KeyError) as exc:        # not a readable distcloth run output
+        print(f"cannot read the runs' frames: {exc}", file=sys.stderr)
+        return 2
     if A.shape != B.shape:
         print(f"the runs differ in shape: {A.shape} against {B.shape}", file=sys.stderr)
         return 2
