@@ -154,23 +154,31 @@ def _table(scene, rows, ref_rows):
     return "\n".join(lines)
 
 
-def _ratios(rows):
-    """For each peer setting: the cheapest distcloth setting at equal or lower
-    error, and how many times faster it is per simulated second."""
+def _matches(rows):
+    """(peer row, the cheapest distcloth row at equal or lower error, or None)
+    for every measured peer setting."""
     ours = [r for r in rows if r["tool"] == "distcloth" and r["ok"] and r["error"] is not None]
-    lines = ["| peer setting | peer error mm | peer s per sim-s | distcloth at equal or lower error "
-             "| its error mm | its s per sim-s (stepping / process) | ratio (stepping / process) |",
-             "|---|---|---|---|---|---|---|"]
-    best = None
+    out = []
     for p in rows:
         if p["tool"] == "distcloth" or not p["ok"] or p["error"] is None:
             continue
         match = [d for d in ours if d["error"] <= p["error"]]
-        if not match:
+        out.append((p, min(match, key=lambda r: r["wall"]) if match else None))
+    return out
+
+
+def _ratios(rows):
+    """For each peer setting: the cheapest distcloth setting at equal or lower
+    error, and how many times faster it is per simulated second."""
+    lines = ["| peer setting | peer error mm | peer s per sim-s | distcloth at equal or lower error "
+             "| its error mm | its s per sim-s (stepping / process) | ratio (stepping / process) |",
+             "|---|---|---|---|---|---|---|"]
+    best = None
+    for p, d in _matches(rows):
+        if d is None:
             lines.append(f"| {p['tool']} {p['label']} | {_mm(p['error'])} | {p['wall']:.2f} | "
                          f"no distcloth setting measured reaches this error | | | |")
             continue
-        d = min(match, key=lambda r: r["wall"])
         ratio, ratio_p = p["wall"] / d["wall"], p["wall"] / d["process"]
         lines.append(f"| {p['tool']} {p['label']} | {_mm(p['error'])} | {p['wall']:.2f} | {d['label']} | "
                      f"{_mm(d['error'])} | {d['wall']:.2f} / {d['process']:.2f} | "
@@ -194,18 +202,11 @@ def _in_use(row) -> bool:
 def _target_line(rows) -> str:
     """Against the peer settings in use: the smallest speed ratio, and the
     settings no distcloth setting matches in error."""
-    ours = [r for r in rows if r["tool"] == "distcloth" and r["ok"] and r["error"] is not None]
-    peers = [p for p in rows if _in_use(p) and p["ok"] and p["error"] is not None]
-    if not peers:
+    pairs = [(p, d) for p, d in _matches(rows) if _in_use(p)]
+    if not pairs:
         return ""
-    ratios, unmatched = [], []
-    for p in peers:
-        match = [d for d in ours if d["error"] <= p["error"]]
-        if match:
-            d = min(match, key=lambda r: r["wall"])
-            ratios.append((p["wall"] / d["wall"], p, d))
-        else:
-            unmatched.append(f"{p['tool']} {p['label']} ({_mm(p['error'])} mm)")
+    ratios = [(p["wall"] / d["wall"], p, d) for p, d in pairs if d is not None]
+    unmatched = [f"{p['tool']} {p['label']} ({_mm(p['error'])} mm)" for p, d in pairs if d is None]
     text = "Against the peer settings in use (Blender quality 20 or better, Newton 10 substeps or more): "
     if ratios:
         ratio, p, d = min(ratios, key=lambda t: t[0])
