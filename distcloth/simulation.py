@@ -494,10 +494,21 @@ class Simulation:
             # ... as a one-step scheme: a multistep history from before a
             # contact's velocity jump carries the energy it removed back in
             history, self.state.history = self.state.history, None
+            # (not where an unconverged step is rejected anyway)
+            early = tc.energy_retry_until == "no_gain" and not tc.require_newton_convergence
             try:
+                self.integrator.retry_stop = self._gains_none if early else None
                 result, reason, fatal = self._attempt(h, t_end)
+                if (early and reason is not None and not fatal
+                        and reason.startswith((ENERGY_GAIN, STEP_GAIN))):
+                    # the checks after the solve (contact response, strain
+                    # limiting) can add what the iterate did not have: Newton
+                    # to its limit, as without the early stop
+                    self.integrator.retry_stop = None
+                    result, reason, fatal = self._attempt(h, t_end)
             finally:
                 self.integrator.newton_override = None
+                self.integrator.retry_stop = None
                 if reason is not None:
                     self.state.history = history
             if reason is None:
@@ -623,10 +634,12 @@ class Simulation:
         state.touching = result.touching
         state.acceleration = acceleration
         if not result.newton_converged:
+            how = (f"stopped after {result.newton_iterations} iterations once the step "
+                   f"gained no energy (time.energy_retry_until)" if result.stopped_early else
+                   f"used all {result.newton_iterations} iterations")
             state.newton_unconverged = self._counted(
                 state.newton_unconverged,
-                f"step {state.step}: Newton used all {result.newton_iterations} "
-                f"iterations (residual {result.newton_residual:.3g} > "
+                f"step {state.step}: Newton {how} (residual {result.newton_residual:.3g} > "
                 f"{self.cfg.time.newton_tolerance:g}); accepted, counted in "
                 f"newton_unconverged (time.require_newton_convergence rejects)")
         if self.energy_guard.wants_reference(state.t, state.energy_reference):
@@ -678,6 +691,23 @@ class Simulation:
         if reason is not None and not self.energy_guard.enforce:
             self._energy_excess, reason = reason, None     # accepted: a warning at commit
         return reason, energies
+
+    def _gains_none(self, x1, v1) -> bool:
+        """Collective: would the owned rows (x1, v1) of a retried step's Newton
+        iterate pass the energy guard and end no higher than the last
+        committed energy (within STEP_GAIN_TOLERANCE * S)?  False where the
+        scene has no energy reference (not passive): the retry then iterates
+        to its limit."""
+        ref, last = self.state.energy_reference, self._last_energy
+        if ref is None or last is None:
+            return False
+        n = self.n_owned
+        x = self.ctx.local_array(x1)
+        kinetic = 0.5 * float(np.sum(self.mass[:n] * np.einsum("ij,ij->i", v1, v1)))
+        energies = [float(e) for e in self.comm.sum(np.array([kinetic, *self._local_potentials(x)]))]
+        if self.energy_guard.check(ref, *energies) is not None:
+            return False
+        return sum(energies) - last <= STEP_GAIN_TOLERANCE * ref[1]
 
     def _gains_in_step(self, energies, h) -> bool:
         """A step of a dissipative scheme (backward Euler, BDF-2's first) on a passive

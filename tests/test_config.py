@@ -161,7 +161,7 @@ THE_EFFECTS = ("one of gravity | membrane | bending | damping | drag | collision
                "strain_limiting | loads")
 TIME_KEYS = ("end, step, integrator, newton_iterations, newton_tolerance, newmark_beta, "
              "newmark_gamma, energy_momentum, adaptive, max_halvings, max_strain, energy_guard, max_energy_gain, "
-             "energy_retry_newton, require_newton_convergence, linearise_at")
+             "energy_retry_newton, energy_retry_until, require_newton_convergence, linearise_at")
 
 # (key path set on base_scene(), value, the expected line after 'config error: ')
 ERRORS = [
@@ -210,6 +210,8 @@ ERRORS = [
      "time.integrator: 'rk5' — one of backward_euler | bdf2 | implicit_midpoint | newmark | "
      "symplectic_euler | explicit_midpoint | rk4"),
     ("time", {"newmark_beta": 0.6}, "time.newmark_beta: 0.6 — a finite number >= 0 and <= 0.5"),
+    ("time", {"energy_retry_until": "never"},
+     "time.energy_retry_until: 'never' — one of no_gain | converged"),
     ("time", {"newton_iterations": 0}, "time.newton_iterations: 0 — an integer >= 1 and <= 100"),
     ("time", {"newton_iterations": 2.0},
      "time.newton_iterations: 2.0 — an integer >= 1 and <= 100"),

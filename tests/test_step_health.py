@@ -9,6 +9,8 @@
   names the step and the gain, is what stopped it (off, the run goes on),
   and with ``adaptive`` the halved steps keep the energy inside its bound;
 * the guard waits for moving colliders to stop;
+* the Newton retry of a step that gained energy stops once its iterate gains
+  none, and no committed step then gains;
 * an unconverged Newton loop is counted, and rejected on request.
 """
 import numpy as np
@@ -115,6 +117,34 @@ def test_the_newton_retry_runs_the_overstretching_scene_to_its_end():
     assert sim.energy_retries > 0
     assert max(d["total_energy"] for d in diags) <= e_ref + 0.1 * scale
     sim.destroy()
+
+
+def test_the_retry_stops_once_the_step_gains_no_energy():
+    # the same retried steps, with Newton to convergence or stopped at the first
+    # iterate that gains no energy (the default): the early stop must take fewer
+    # Newton iterations, and every step it committed must end no higher than the
+    # step before it (within STEP_GAIN_TOLERANCE * S, the test it stopped on);
+    # backward Euler is dissipative, so a converged step could not either
+    from distcloth.simulation import STEP_GAIN_TOLERANCE
+    runs = {}
+    for until in ("converged", "no_gain"):
+        sim = make_sim(_overstretching_scene(energy_retry_newton=10, energy_retry_until=until))
+        e_ref, scale = sim.state.energy_reference
+        e0 = sum(sim.energies())
+        diags = _run(sim, 10)
+        assert abs(sim.state.t - 1.0) < 1e-12 and diags[-1]["rejected_steps"] == 0
+        assert sim.energy_retries > 0
+        energies = np.array([e0] + [d["total_energy"] for d in diags])
+        assert np.all(energies <= e_ref + 0.1 * scale)
+        runs[until] = (energies, np.array([d["newton_iterations"] for d in diags]), scale,
+                       diags[-1]["newton_unconverged"])
+        sim.destroy()
+    energies, newton, scale, unconverged = runs["no_gain"]
+    assert newton.sum() < runs["converged"][1].sum()
+    assert unconverged > runs["converged"][3]        # the stopped steps are counted
+    retried = np.flatnonzero(newton > 1)
+    assert retried.size > 0
+    assert np.all(np.diff(energies)[retried] <= STEP_GAIN_TOLERANCE * scale)
 
 
 def test_guard_waits_for_moving_colliders():

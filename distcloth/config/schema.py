@@ -42,6 +42,7 @@ BENDING_MODELS = ("flexion", "grid_lines", "dihedral", "isometric", "dihedral_sh
                   "isometric_shell")
 MAT_TYPES = ("baij", "aij")
 LINEARISATION_POINTS = ("predictor", "start")
+RETRY_STOPS = ("no_gain", "converged")     # when the energy retry's Newton stops
 DRAPE_METHODS = ("stop_and_go", "dynamic", "quasistatic", "newton")
 CONTACT_MODELS = ("constraints", "barrier")   # body contact in an implicit step
 DRAPE_STOP_ON = ("potential", "kinetic", "both")
@@ -647,6 +648,12 @@ class TimeSpec:
                                        "stiff membrane can gain energy; docs/integrators.md); "
                                        "1: no retry", at_least=1,
                                        at_most=MAX_NEWTON_ITERATIONS)
+    energy_retry_until: str = choice("no_gain", RETRY_STOPS, doc="when the energy retry's "
+                                     "Newton stops before energy_retry_newton iterations: "
+                                     "no_gain, once an iterate passes the energy guard and ends "
+                                     "no higher than the last step's energy (a step still "
+                                     "rejected is solved again to the limit); converged, only "
+                                     "at newton_tolerance")
     require_newton_convergence: bool | None = setting(None, doc="true: a step whose Newton "
                                                       "loop ends above newton_tolerance is "
                                                       "rejected; false: accepted, counted in "

@@ -35,6 +35,7 @@ class StepResult:
     ksp_residual: float = 0.0     # largest true relative residual of the step's solves
     newton_residual: float = 0.0  # final relative Newton residual (0 for explicit steps)
     newton_converged: bool = True # False: the Newton loop used every iteration above tolerance
+    stopped_early: bool = False   # the energy retry's Newton stopped once the step gained none
 
 
 class Integrator:
@@ -42,6 +43,9 @@ class Integrator:
     stability_factor = math.inf      # explicit schemes: h < 0.9 * factor / sqrt(lambda_max)
     held_gain = 1.0                  # a held row ends at x0 + h v0 + held_gain * h * z
     newton_override: int | None = None   # Newton iterations of a retried step (implicit)
+    # the retried step's Newton stops before converging once this predicate of
+    # its iterate's (x1, v1) (owned rows; collective) holds; None: it does not
+    retry_stop = None
 
     def __init__(self, cfg):
         self.cfg = cfg
