@@ -372,13 +372,15 @@ class Simulation:
                 elastic += t.energy(x)
         return grav, elastic
 
-    def energies(self) -> tuple[float, float, float]:
-        """(kinetic, gravitational, elastic) energy of the current state, summed
-        over ranks."""
+    def energies(self, x=None, v=None) -> tuple[float, float, float]:
+        """(kinetic, gravitational, elastic) energy at x (local rows, ghosts
+        valid) and v (owned rows at least), default the current state's,
+        summed over ranks."""
         n = self.n_owned
-        v = self.state.v
+        x = self.state.x if x is None else x
+        v = self.state.v if v is None else v
         kinetic = 0.5 * float(np.sum(self.mass[:n] * np.einsum("ij,ij->i", v[:n], v[:n])))
-        k, g, e = self.comm.sum(np.array([kinetic, *self._local_potentials(self.state.x)]))
+        k, g, e = self.comm.sum(np.array([kinetic, *self._local_potentials(x)]))
         return float(k), float(g), float(e)
 
     def potential_energies(self, x=None) -> tuple[float, float]:
@@ -701,10 +703,7 @@ class Simulation:
         ref, last = self.state.energy_reference, self._last_energy
         if ref is None or last is None:
             return False
-        n = self.n_owned
-        x = self.ctx.local_array(x1)
-        kinetic = 0.5 * float(np.sum(self.mass[:n] * np.einsum("ij,ij->i", v1, v1)))
-        energies = [float(e) for e in self.comm.sum(np.array([kinetic, *self._local_potentials(x)]))]
+        energies = self.energies(self.ctx.local_array(x1), v1)
         if self.energy_guard.check(ref, *energies) is not None:
             return False
         return sum(energies) - last <= STEP_GAIN_TOLERANCE * ref[1]
