@@ -121,6 +121,7 @@ class Simulation:
                                          self.ghosts, comm)
         self.limiter_unconverged_steps = 0
         self.energy_retries = 0           # steps solved again with Newton after a gain
+        self._retry_stopped = False       # the retry's Newton stopped early in this attempt
         self._last_energy = None          # total energy of the committed state
         self.pattern = BlockPattern(self.n_owned, self.n_local,
                                     [s for t in self.terms for s in t.stencils()])
@@ -500,12 +501,14 @@ class Simulation:
             early = tc.energy_retry_until == "no_gain" and not tc.require_newton_convergence
             try:
                 self.integrator.retry_stop = self._gains_none if early else None
+                self._retry_stopped = False
                 result, reason, fatal = self._attempt(h, t_end)
-                if (early and reason is not None and not fatal
+                if (self._retry_stopped and reason is not None and not fatal
                         and reason.startswith((ENERGY_GAIN, STEP_GAIN))):
                     # the checks after the solve (contact response, strain
                     # limiting) can add what the iterate did not have: Newton
-                    # to its limit, as without the early stop
+                    # to its limit, as without the early stop (a retry that
+                    # never stopped early already went there)
                     self.integrator.retry_stop = None
                     result, reason, fatal = self._attempt(h, t_end)
             finally:
@@ -706,7 +709,10 @@ class Simulation:
         energies = self.energies(self.ctx.local_array(x1), v1)
         if self.energy_guard.check(ref, *energies) is not None:
             return False
-        return sum(energies) - last <= STEP_GAIN_TOLERANCE * ref[1]
+        if sum(energies) - last > STEP_GAIN_TOLERANCE * ref[1]:
+            return False
+        self._retry_stopped = True      # a rejection after it deserves the full retry
+        return True
 
     def _gains_in_step(self, energies, h) -> bool:
         """A step of a dissipative scheme (backward Euler, BDF-2's first) on a passive
