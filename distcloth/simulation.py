@@ -13,11 +13,13 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+from dataclasses import replace
 
 import numpy as np
 
 from .collision.contact import MAX_CONTACT_PASSES, ContactModel
 from .config.load import command_line_key
+from .config.rules import barrier_misfit
 from .config.schema import DEFAULT_SOLVER, OPTION_PREFIX, ConfigError
 from .energy_guard import ENERGY_GAIN, EnergyGuard, drive_end as grip_drive_end, gravity_scale
 from .frame_fields import FrameFields
@@ -526,6 +528,9 @@ class Simulation:
         if fatal or not tc.adaptive or depth >= tc.max_halvings:
             if tc.adaptive and not fatal:
                 reason += f" (after {depth} halvings, h = {h:.3g} s)"
+            if reason.startswith(ENERGY_GAIN) and self._barrier_would_serve():
+                reason += ("; contact.model: barrier takes large steps onto a body "
+                           "(docs/integrators.md, \"Large steps onto a body\")")
             raise SimulationError(self.state.step, reason)
         self.say(f"step {self.state.step}: rejected at h = {h:.3g} s ({reason}); "
                  f"retrying as two steps of {h / 2:.3g} s")
@@ -533,6 +538,16 @@ class Simulation:
         self._advance(h / 2, self.state.t + h / 2, depth + 1)
         result, h2 = self._advance(h / 2, t_end, depth + 1)
         return result, min(h2, h / 2)
+
+    def _barrier_would_serve(self) -> bool:
+        """Does the scene hold bodies as contact constraints, where the barrier
+        could serve it?  Constraints chosen from a free-flight prediction gain
+        energy in large steps onto a body; a barrier in the Newton solve does not."""
+        cfg = self.cfg
+        if not self.contact.has_bodies or cfg.contact.model != "constraints":
+            return False
+        as_barrier = replace(cfg, contact=replace(cfg.contact, model="barrier"))
+        return barrier_misfit(as_barrier) is None
 
     def _attempt(self, h, t_end):
         """One tentative step of size h: (result, None, False) if accepted and
@@ -709,7 +724,7 @@ class Simulation:
         energies = self.energies(self.ctx.local_array(x1), v1)
         if self.energy_guard.check(ref, *energies) is not None:
             return False
-        if sum(energies) - last > STEP_GAIN_TOLERANCE * ref[1]:
+        if _gains(energies, last, ref):
             return False
         self._retry_stopped = True      # a rejection after it deserves the full retry
         return True
@@ -724,7 +739,7 @@ class Simulation:
                 or self.integrator.newton_override is not None
                 or self.cfg.time.energy_retry_newton <= self.integrator.newton_iterations()):
             return False
-        return sum(energies) - last > STEP_GAIN_TOLERANCE * ref[1]
+        return _gains(energies, last, ref)
 
     def destroy(self):
         if self.system is not None:
@@ -733,6 +748,12 @@ class Simulation:
 
 
 _EQUALS_HINT = "; an option and its value are two words: -name value, not -name=value"
+
+
+def _gains(energies, last: float, reference) -> bool:
+    """Do the state's ``energies`` end more than STEP_GAIN_TOLERANCE * S above
+    the last committed total ``last`` (S: the energy reference's scale)?"""
+    return sum(energies) - last > STEP_GAIN_TOLERANCE * reference[1]
 
 
 def _refuse_unprefixed_options() -> None:

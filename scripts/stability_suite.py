@@ -12,7 +12,7 @@ It runs
         --settings case_step newton mass_spring explicit_stable explicit_forced \\
         --output docs/stability.md
 
-and then lists the FAILED variants from the CSV. About 9 minutes on the
+and then lists the FAILED variants from the CSV. About 35 minutes on the
 2-core Debian 12 VM (docs/stability.md records the time of the committed run).
 Extra options (--cases, --integrators, --settings, --reduced) go to the command.
 """

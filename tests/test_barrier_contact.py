@@ -187,6 +187,21 @@ def test_the_stiff_tablecloth_lands_on_the_sphere_with_20_ms_steps():
     assert np.max(z) == pytest.approx(0.505, abs=2.5e-3)   # on the sphere's top, in the band
 
 
+def test_a_stop_at_a_large_step_onto_a_body_names_the_barrier():
+    # the same landing at 33 ms with contact as constraints and no Newton
+    # retry: the linearised landing step gains energy (docs/integrators.md,
+    # "Large steps onto a body"); the stop says which contact model takes it
+    from distcloth.simulation import SimulationError
+    raw = _sphere_scene(9, 1 / 30, 1.0, energy_retry_newton=1)
+    raw["contact"] = {"model": "constraints"}
+    sim = make_sim(raw, comm=MPI.COMM_WORLD)
+    with pytest.raises(SimulationError, match=r"step \d+: energy gain: .*; contact.model: "
+                                              r"barrier takes large steps onto a body"):
+        for _ in range(30):
+            sim.step()
+    sim.destroy()
+
+
 def _ranks_scene(out):
     raw = _sphere_scene(9, 0.01, 0.2)
     raw["cloth"][0]["mesh"]["center"] = [0.0, 0.0, 0.52]

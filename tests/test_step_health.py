@@ -10,7 +10,8 @@
   and with ``adaptive`` the halved steps keep the energy inside its bound;
 * the guard waits for moving colliders to stop;
 * the Newton retry of a step that gained energy stops once its iterate gains
-  none, and no committed step then gains;
+  none, and no committed step then gains; a rejection after that early stop
+  solves the step again to Newton's limit;
 * an unconverged Newton loop is counted, and rejected on request.
 """
 import numpy as np
@@ -145,6 +146,42 @@ def test_the_retry_stops_once_the_step_gains_no_energy():
     retried = np.flatnonzero(newton > 1)
     assert retried.size > 0
     assert np.all(np.diff(energies)[retried] <= STEP_GAIN_TOLERANCE * scale)
+
+
+def test_a_rejection_after_an_early_stop_solves_the_step_to_the_limit():
+    # the checks after the solve (contact response, strain limiting) can add
+    # energy the stopped iterate did not have: the attempt is then rejected and
+    # the step solved again with Newton to its limit, as the old rule does.  The
+    # rejection is injected at the first early stop (a scene where a response
+    # adds exactly that much is not at hand); up to that step both rules take
+    # the same path, so the step must equal the converged rule's to round-off
+    from distcloth.energy_guard import ENERGY_GAIN
+    converged = make_sim(_overstretching_scene(energy_retry_newton=10,
+                                               energy_retry_until="converged"))
+    reference = _run(converged, 10)
+    sim = make_sim(_overstretching_scene(energy_retry_newton=10, energy_retry_until="no_gain"))
+    check, rejected = sim._check_state, []
+
+    def rejecting_the_first_early_stop():
+        reason, energies = check()
+        if sim._retry_stopped and not rejected:
+            rejected.append(sim.state.step)
+            return f"{ENERGY_GAIN}: injected after the early stop", energies
+        return reason, energies
+
+    sim._check_state = rejecting_the_first_early_stop
+    for _ in range(10):
+        diag = sim.step()
+        if rejected:
+            break
+    assert rejected == [sim.state.step]
+    first = reference[sim.state.step - 1]
+    assert diag["newton_iterations"] == first["newton_iterations"] > 1
+    assert diag["rejected_steps"] == 0
+    assert diag["newton_unconverged"] == first["newton_unconverged"]
+    assert diag["total_energy"] == pytest.approx(first["total_energy"], rel=1e-12)
+    converged.destroy()
+    sim.destroy()
 
 
 def test_guard_waits_for_moving_colliders():

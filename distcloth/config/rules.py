@@ -313,23 +313,31 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
 
 
 def _barrier_scene(config: SceneConfig) -> None:
-    """The barrier's Newton solve minimises the step's incremental potential:
-    backward Euler's and BDF-2's (the other schemes' residuals are not its
-    gradient); the bodies must answer distances (not image maps), and the
-    contact distance must be positive for a default width."""
+    error = barrier_misfit(config)
+    if error is not None:
+        raise error
+
+
+def barrier_misfit(config: SceneConfig) -> ConfigError | None:
+    """Why ``config`` could not run with ``contact.model: barrier`` (None: it
+    could).  The barrier's Newton solve minimises the step's incremental
+    potential: backward Euler's and BDF-2's (the other schemes' residuals are
+    not its gradient); the bodies must answer distances (not image maps), and
+    the contact distance must be positive for a default width."""
     if config.time.integrator not in BARRIER_INTEGRATORS:
-        raise ConfigError("time.integrator", config.time.integrator,
-                          "backward_euler or bdf2 with contact.model: barrier")
+        return ConfigError("time.integrator", config.time.integrator,
+                           "backward_euler or bdf2 with contact.model: barrier")
     for i, spec in enumerate(config.colliders):
         if spec.shape == "mesh" and spec.method == "image":
-            raise ConfigError(f"colliders.{i}.method", "image",
-                              "bvh with contact.model: barrier (image maps give no distance "
-                              "field to a Newton iterate)")
+            return ConfigError(f"colliders.{i}.method", "image",
+                               "bvh with contact.model: barrier (image maps give no distance "
+                               "field to a Newton iterate)")
     if config.contact.barrier_width is None:
         d = max(s.thickness for s in config.cloth) + max(c.thickness for c in config.colliders)
         if d <= 0.0:
-            raise ConfigError("contact.barrier_width", None, "a width in m > 0 (the cloth and "
-                              "colliders have no thickness to take half of)")
+            return ConfigError("contact.barrier_width", None, "a width in m > 0 (the cloth and "
+                               "colliders have no thickness to take half of)")
+    return None
 
 
 def _follow_skin(config: SceneConfig) -> SceneConfig:
