@@ -1,10 +1,11 @@
-"""Pre-filtered constraints: (S A S + I - S) y = S (b - A z), dv = y + z.
+"""Pre-filtered constraints: (S A S + d (I - S)) y = S (b - A z), dv = y + z.
 
 The defining properties (Baraff and Witkin 1998, §5.3): the constrained
 components take the prescribed change, (I - S) dv = (I - S) z, and the free
 components satisfy the equations, S (A dv - b) = 0.  Checked with dense
 algebra on a random SPD block system, for pins (S = 0), plane contacts
-(S = I - n n^T) and a mix, with some constrained vertices being ghosts.
+(S = I - n n^T) and a mix, with some constrained vertices being ghosts;
+and the filtered system scales with A (d, each vertex's mean diagonal).
 """
 import numpy as np
 import pytest
@@ -70,6 +71,27 @@ def test_filtered_solve_properties(kinds):
     assert np.abs(free).max() <= 1e-10 * np.abs(b).max()
     fixed = np.einsum("nij,nj->ni", np.eye(3) - S_local[:n_owned], dv - z_local[:n_owned])
     assert np.abs(fixed).max() <= 1e-12
+
+
+def test_the_filtered_system_scales_with_the_matrix():
+    # A in other units (or at another step) is c A: the filtered matrix must be
+    # c times the filtered one, so its conditioning does not depend on them (a
+    # unit block in the constrained directions did); the right-hand side as well
+    rng = np.random.default_rng(3)
+    n_owned, n_local = 10, 13
+    pattern, data, _ = random_system(rng, n_owned, n_local)
+    idx = np.array([1, 4, 7, 12])
+    cons = Constraints(idx, projections(rng, ["pin", "plane", "plane", "plane"]),
+                       rng.normal(size=(idx.size, 3)))
+    b = rng.normal(size=(n_owned, 3))
+    fdata, frhs = filter_system(pattern, data, b, cons)
+    for c in (1e-6, 1e3):
+        cdata, crhs = filter_system(pattern, c * data, c * b, cons)
+        np.testing.assert_allclose(cdata, c * fdata, rtol=1e-12, atol=0.0)
+        np.testing.assert_allclose(crhs, c * frhs, rtol=1e-12, atol=1e-300)
+    # a pinned vertex's block is its mean diagonal times the identity
+    pin = pattern.diag_slots[1]
+    np.testing.assert_allclose(fdata[pin], np.trace(data[pin]) / 3.0 * np.eye(3), rtol=1e-12)
 
 
 def test_no_constraints_is_identity():

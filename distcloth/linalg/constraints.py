@@ -5,11 +5,16 @@ a prescribed velocity change z_i in the constrained ones (a pin: S = 0; a
 contact: S = I - n n^T).  Instead of the modified-PCG of Baraff and Witkin we
 solve the SPD system
 
-    (S A S + I - S) y = S (b - A z),    dv = y + z
+    (S A S + d_i (I - S)) y = S (b - A z),    dv = y + z
 
 which has the same sparsity as A, so the matrix pattern never changes and
 any PETSc preconditioner applies.  Only blocks in rows or columns of
-constrained vertices are touched.
+constrained vertices are touched.  d_i, the mean of vertex i's diagonal in
+A, puts the constrained directions at the scale of the free ones (A is in
+units of mass, m + h^2 k, so a 1 there depends on the units and the step):
+the solution is the same, the filtered system scales with A, and CG with
+block-Jacobi SGS or GAMG takes fewer iterations where contacts hold part of
+a vertex (docs/benchmarks.md, "At scale").
 """
 from __future__ import annotations
 
@@ -57,8 +62,9 @@ def filter_system(pattern, data: np.ndarray, rhs: np.ndarray, cons: Constraints)
     cols_hit = np.nonzero(cs >= 0)[0]
     out[cols_hit] = np.einsum("nij,njk->nik", out[cols_hit], cons.S[cs[cols_hit]])
     owned = cons.index[cons.index < n_owned]
-    eye_minus_S = np.eye(3)[None] - cons.S[slot[owned]]
-    out[pattern.diag_slots[owned]] += eye_minus_S
+    diag = pattern.diag_slots[owned]
+    scale = np.einsum("nii->n", data[diag]) / 3.0
+    out[diag] += (np.eye(3)[None] - cons.S[slot[owned]]) * scale[:, None, None]
     frhs = rhs - Az
     frhs[owned] = np.einsum("nij,nj->ni", cons.S[slot[owned]], frhs[owned])
     return out, frhs
