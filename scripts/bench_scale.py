@@ -107,8 +107,10 @@ def progress(comm, text: str, mem: dict | None = None) -> None:
 
 
 def worker(args):
-    from distcloth.linalg.petsc import init_petsc
+    from distcloth.linalg.petsc import command_line_options, init_petsc
     init_petsc(args.petsc.split())
+    # the options given here win over the script's preset, as on distcloth's command line
+    given = command_line_options()
     from distcloth.config.load import config_from_dict
     from distcloth.parallel.comm import Comm
     from distcloth.run import open_writer
@@ -128,7 +130,7 @@ def worker(args):
     model = build_model(cfg)
     mem["model"] = memory()
     progress(comm, "model built", mem)
-    sim = Simulation(cfg, model, comm, quiet=True)
+    sim = Simulation(cfg, model, comm, cmdline_options=given, quiet=True)
     sim.prepare()
     mem["prepared"] = memory()
     writer = open_writer(sim, cfg, comm, out, sim.diagnostic_names(),

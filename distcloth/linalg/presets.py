@@ -2,11 +2,14 @@
 (without prefix, the scene's ``solver:``) and the matrix type they need (the
 scene's ``linear_system.mat_type``).
 
-The AMG settings are the best of a small sweep on the 100k-vertex case
-(docs/benchmarks.md, scripts/bench_step.py): GAMG with one symmetric-SOR
-sweep per level and a 0.02 aggregation threshold, hypre BoomerAMG with HMIS
-coarsening and ext+i interpolation; both on AIJ (PETSc's GAMG cannot build
-its graph from BAIJ). ``sgs32`` is the reference preconditioner of the EG07
+The AMG settings are the best of small sweeps on the 100k-vertex cloths
+(docs/benchmarks.md, scripts/bench_step.py and scripts/bench_scale.py): GAMG
+with one symmetric-SOR sweep per level and every coupling in its aggregation
+graph (threshold 0: on a stiff membrane a threshold of 0.02 drops enough
+couplings that GAMG coarsens by only 4 a level into dense coarse matrices,
+operator complexity 2.2 against 1.09, and a solve in contact at 317² costs
+30-40 % more), hypre BoomerAMG with HMIS coarsening and ext+i interpolation;
+both on AIJ (PETSc's GAMG cannot build its graph from BAIJ). ``sgs32`` is the reference preconditioner of the EG07
 tutorial, Part 1 §5.7, with a float32 matrix (distcloth/linalg/sgs32.py).
 """
 from __future__ import annotations
@@ -19,7 +22,7 @@ PRECONDITIONERS = {
     "bjacobi_sgs": ({"pc_type": "bjacobi", "sub_pc_type": "sor"}, "baij"),
     "sgs32": ({"pc_type": "python",
                "pc_python_type": "distcloth.linalg.sgs32.SinglePrecisionSGS"}, "baij"),
-    "gamg": ({"pc_type": "gamg", "pc_gamg_reuse_interpolation": "true", "pc_gamg_threshold": 0.02,
+    "gamg": ({"pc_type": "gamg", "pc_gamg_reuse_interpolation": "true", "pc_gamg_threshold": 0.0,
               "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor",
               "mg_levels_ksp_max_it": 1}, "aij"),
     "hypre": ({"pc_type": "hypre", "pc_hypre_type": "boomeramg",
