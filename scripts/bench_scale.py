@@ -62,10 +62,15 @@ def solver_settings(smooths: int = 1):
     smoothing steps (pc_gamg_agg_nsmooths; the preset's 1). 0, plain
     aggregation, needs a third less memory in the set-up and far fewer
     set-up flops, but at 317² in contact 2-3x the CG iterations
-    (docs/benchmarks.md, "At scale")."""
+    (docs/benchmarks.md, "At scale"). Plain aggregation keeps the 0.02
+    aggregation threshold the preset dropped: its piecewise-constant
+    interpolation over the large aggregates of every coupling cost 1.8x a
+    solve at 1001² (docs/benchmarks.md, "GAMG's aggregation threshold on
+    the stiff membrane")."""
     from distcloth.linalg.presets import PRECONDITIONERS
     options, mat_type = PRECONDITIONERS["gamg"]
-    return ({"ksp_type": "cg", **options, "pc_gamg_agg_nsmooths": smooths, "ksp_rtol": 1e-5},
+    plain = {"pc_gamg_threshold": 0.02} if smooths == 0 else {}
+    return ({"ksp_type": "cg", **options, "pc_gamg_agg_nsmooths": smooths, **plain, "ksp_rtol": 1e-5},
             {"mat_type": mat_type})
 
 
