@@ -43,9 +43,9 @@ SOLVERS = {"bjacobi+sgs": _cg("bjacobi_sgs"), "gamg": _cg("gamg"), "hypre": _cg(
 # not in the default sweep: GAMG rebuilt only every 5th solve and reused in between
 EXTRA_SOLVERS = {
     "gamg-rebuild5": _cg("gamg", pc_rebuild_every=5),
-    # GAMG dropping the couplings weaker than 0.02 from its aggregation graph,
-    # the preset before contact at 317² showed its dense coarse levels
-    # (docs/benchmarks.md, "317² with contact as a barrier")
+    # GAMG dropping the couplings weaker than 0.02 from its aggregation graph:
+    # the preset until contact at 317² showed its dense coarse levels
+    # (docs/benchmarks.md, "GAMG's aggregation threshold on the stiff membrane")
     "gamg-threshold0.02": ({**_cg("gamg")[0], "pc_gamg_threshold": 0.02}, _cg("gamg")[1]),
     # EG07 tutorial, Part 1 §5.7: the reference preconditioner with a float32 matrix
     # (numba, Python PC)
