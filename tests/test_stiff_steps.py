@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from distcloth.inprocess import build_simulation
+from distcloth.integrate import implicit
 from distcloth.integrate.implicit import ImplicitScheme
 from distcloth.linalg.system import LinearSystem
 from distcloth.parallel.comm import Comm
@@ -136,6 +137,7 @@ def test_a_newton_correction_leaves_the_warm_start(monkeypatch):
     seen = []      # (a correction?, y when the solve began, its solution, nonzero start?)
     solve = LinearSystem.solve
     flag = flag_corrections(monkeypatch)
+
     def logged(self, rhs, guess=None):
         start = self.y.array.copy()
         out = solve(self, rhs, guess)
@@ -163,10 +165,10 @@ def test_newton_corrections_are_solved_inexactly_until_the_last(monkeypatch):
     # a scene's own Newton iterations solve each correction only as far as the
     # residual is small (Eisenstat and Walker 1996), and the last one allowed
     # at the scene's ksp_rtol unless a looser solve reaches the tolerance
-    import distcloth.integrate.implicit as implicit
     seen = []      # (a correction?, the solve's relative tolerance)
     solve = LinearSystem.solve
     flag = flag_corrections(monkeypatch)
+
     def logged(self, rhs, guess=None):
         seen.append((flag["on"], self.rtol))
         return solve(self, rhs, guess)
