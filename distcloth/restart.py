@@ -78,6 +78,8 @@ def capture(sim, weld=None) -> tuple[dict, dict]:
         scalars["history_h"] = float(state.history.h)
     if state.energy_reference is not None:
         scalars["energy_reference"] = np.array(state.energy_reference, dtype=np.float64)
+    if state.step_error is not None:
+        scalars["step_error"] = np.array(state.step_error, dtype=np.float64)
     if sim.system is not None:
         scalars["solver_solves"] = int(sim.system.solves)
     if weld is not None:
@@ -107,6 +109,8 @@ def restore_state(sim, scalars: dict, arrays: dict) -> None:
     state.touching = arrays["touching"][:, local].copy() if "touching" in arrays else None
     ref = scalars.get("energy_reference")
     state.energy_reference = None if ref is None else (float(ref[0]), float(ref[1]))
+    err = scalars.get("step_error")
+    state.step_error = None if err is None else (float(err[0]), float(err[1]))
     state.contacts = None
     if "contact_collider" in arrays:
         collider = arrays["contact_collider"][local]

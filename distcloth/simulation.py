@@ -336,11 +336,11 @@ class Simulation:
                                gamma)
 
     def _solve(self, data, rhs, cons, guess=None, rtol=None, keep_preconditioner=False,
-               correction=False):
+               correction=False, target=None):
         if keep_preconditioner:
             self.system.keep_preconditioner()
-        with self._tolerance(rtol), (self.system.correcting() if correction
-                                     else contextlib.nullcontext()):
+        with self._tolerance(rtol), self.system.aimed(target), \
+                (self.system.correcting() if correction else contextlib.nullcontext()):
             y, info = solve_constrained(self.system, self.pattern, data, rhs, cons, guess)
         if self.contact.has_bodies:   # the same on every rank: the exchange is collective
             dv = np.zeros((self.n_local, 3))
@@ -650,6 +650,7 @@ class Simulation:
         state = self.state
         state.t = t_end
         state.history = result.history
+        state.step_error = result.local_error
         state.contacts = contacts
         state.touching = result.touching
         state.acceleration = acceleration

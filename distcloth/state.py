@@ -42,6 +42,9 @@ class State:
     rejections: int = 0                  # attempts undone so far (adaptive halving)
     newton_unconverged: int = 0          # accepted steps whose Newton loop ran out
     contact_changes: int = 0             # re-solves the last step's contact set needed
+    # (h, the mass-weighted norm of its local error estimate) of the last
+    # committed step, for the next one's solve tolerance (integrate/implicit.py)
+    step_error: tuple[float, float] | None = None
 
     def snapshot(self) -> "State":
         """A copy to restore if the step is rejected (the history, contacts and
@@ -56,7 +59,7 @@ class State:
         self.v[...] = saved.v
         for name in ("t", "step", "history", "contacts", "touching", "acceleration",
                      "energy_reference",
-                     "rejections", "newton_unconverged", "contact_changes"):
+                     "rejections", "newton_unconverged", "contact_changes", "step_error"):
             setattr(self, name, getattr(saved, name))
 
     def clear_history(self) -> None:

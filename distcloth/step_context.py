@@ -25,6 +25,14 @@ class StepContext:
         self.pipeline = pipeline
         self.ghosts = ghosts
         self.comm = comm
+        self._min_mass = None
+
+    def min_mass(self) -> float:
+        """The smallest vertex mass over the ranks (collective on first use)."""
+        if self._min_mass is None:
+            local = float(np.min(self.mass[: self.n_owned], initial=math.inf))
+            self._min_mass = -float(self.global_max(-local)[0])
+        return self._min_mass
 
     def forces(self, x, v, want_jac: bool, start=None) -> np.ndarray:
         """Sum of the enabled force terms on every local row (each term is a stage);
@@ -74,15 +82,17 @@ class StepContext:
         return self.pipeline.run("assembly", alpha, beta, gamma)
 
     def solve(self, data, rhs, cons, guess=None, rtol=None, keep_preconditioner=False,
-              correction=False):
+              correction=False, target=None):
         """(dv on the owned rows, solve info) of A dv = rhs under the constraints,
         the iteration started from ``guess`` (owned rows) if given; ``rtol``:
         a looser relative tolerance for this solve (an inexact Newton step);
         ``keep_preconditioner``: a multigrid preconditioner is the last solve's
         (a later Newton iteration of the same step); ``correction``: a Newton
-        correction, started from zero, which leaves the warm start as it was."""
+        correction, started from zero, which leaves the warm start as it was;
+        ``target``: the absolute residual |b - A dv| to stop at instead of the
+        relative tolerance (within the bounds of LinearSystem.aimed)."""
         return self.pipeline.run("solve", data, rhs, cons, guess, rtol, keep_preconditioner,
-                                 correction)
+                                 correction, target)
 
     def local_array(self, owned_rows: np.ndarray) -> np.ndarray:
         """(n_local, k): the owned rows with their ghost copies filled in."""

@@ -59,7 +59,9 @@ def worker(args):
     solver = linear_system = None
     if args.pc != "default":
         options, mat_type = PRECONDITIONERS[args.pc]
-        solver = {"ksp_type": "cg", **options, "ksp_rtol": args.rtol}
+        # on the unpreconditioned residual, as the presets stop
+        solver = {"ksp_type": "cg", **options, "ksp_rtol": args.rtol,
+                  "ksp_norm_type": "unpreconditioned"}
         linear_system = {"mat_type": mat_type, "warm_start": args.warm}
     cfg = config_from_dict(s1_scene(args.side, solver, linear_system), str(ROOT), "bench")
     sim = Simulation(cfg, build_model(cfg), comm, quiet=True)
@@ -158,7 +160,8 @@ def accuracy(args):
     comm = Comm()
 
     def run(rtol, warm, step):
-        solver = {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "sor", "ksp_rtol": rtol}
+        solver = {"ksp_type": "cg", "pc_type": "bjacobi", "sub_pc_type": "sor", "ksp_rtol": rtol,
+                  "ksp_norm_type": "unpreconditioned"}
         cfg = config_from_dict(s1_scene(args.side, solver, {"mat_type": "baij", "warm_start": warm},
                                         step), str(ROOT), "bench")
         sim = Simulation(cfg, build_model(cfg), comm, quiet=True)

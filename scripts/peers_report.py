@@ -233,6 +233,8 @@ def _point_label(row) -> str:
         text = "BE " + text
     if s.get("newton", 1) > 1:
         text += f" N<={s['newton']}"
+    if s.get("step_error_fraction"):
+        text += " aimed"
     return text
 
 

@@ -264,10 +264,12 @@ ERRORS = [
      "solver.pc_rebuild_every: 2 — moved: write linear_system.pc_rebuild_every"),
     ("linear_system", {"mat_type": "dense"}, "linear_system.mat_type: 'dense' — one of baij | aij"),
     ("linear_system", {"warm_start": 1}, "linear_system.warm_start: 1 — true or false"),
+    ("linear_system", {"step_error_fraction": 0},
+     "linear_system.step_error_fraction: 0 — a finite number > 0"),
     ("linear_system", {"pc_rebuild_every": 0},
      "linear_system.pc_rebuild_every: 0 — an integer >= 1"),
     ("linear_system", {"ksp_rtol": 1e-8}, "linear_system.ksp_rtol: 1e-08 — unknown key; allowed "
-                                          "keys: mat_type, warm_start, pc_rebuild_every"),
+                                          "keys: mat_type, warm_start, pc_rebuild_every, step_error_fraction"),
     ("work_stealing", {"enabled": "yes"}, "work_stealing.enabled: 'yes' — true or false"),
     ("work_stealing", {"b": 0.5}, "work_stealing.b: 0.5 — a finite number >= 1"),
     ("work_stealing", {"chunk": 0}, "work_stealing.chunk: 0 — an integer >= 1"),
@@ -616,7 +618,8 @@ def test_linear_system_is_read_and_gamg_takes_aij(scene_dir):
 
 
 def test_command_line_options_set_linear_system_and_win(scene_dir):
-    assert own_option_names() == ("mat_type", "warm_start", "pc_rebuild_every")
+    assert own_option_names() == ("mat_type", "warm_start", "pc_rebuild_every",
+                                  "step_error_fraction")
     config = load_config(str(scene_dir / "hanging.yaml"), ["linear_system.pc_rebuild_every=2"],
                          {"warm_start": "true", "pc_rebuild_every": "3"})
     # the scene's mat_type stays; the command line wins over the file and --set
@@ -641,3 +644,20 @@ def test_a_bad_scene_value_is_not_blamed_on_the_command_line(scene_dir):
         load_config(str(scene_dir / "hanging.yaml"), ["linear_system.mat_type=dense"],
                     {"warm_start": "true"})
     assert caught.value.key == "linear_system.mat_type"
+
+
+def test_a_solve_aimed_at_the_step_error_needs_the_unpreconditioned_residual(scene_dir):
+    # the fraction bounds the solve's error through |b - A dv|: a scene's own
+    # solver must stop on that residual; the size presets do
+    raw = base_scene()
+    raw["linear_system"] = {"step_error_fraction": 0.5}
+    assert config_from_dict(raw, str(scene_dir), "x.yaml").linear_system.step_error_fraction == 0.5
+    raw["solver"] = {"ksp_rtol": 1e-6}
+    with pytest.raises(ConfigError) as caught:
+        config_from_dict(raw, str(scene_dir), "x.yaml")
+    assert str(caught.value) == (
+        "linear_system.step_error_fraction: 0.5 — null unless solver.ksp_norm_type is "
+        "unpreconditioned (the fraction bounds the solve's error through |b - A dv|; the size "
+        "presets stop on it)")
+    raw["solver"]["ksp_norm_type"] = "unpreconditioned"
+    config_from_dict(raw, str(scene_dir), "x.yaml")

@@ -285,6 +285,15 @@ def _scene(config: SceneConfig, section: dict, key: str, ctx: Context) -> SceneC
         raise ConfigError("linear_system.mat_type", "baij", "aij with solver.pc_type: gamg "
                           "(PETSc's GAMG cannot build its graph from a BAIJ matrix, the "
                           "default)")
+    fraction = config.linear_system.step_error_fraction
+    if (fraction is not None and config.solver_options
+            and config.solver_options.get("ksp_norm_type") != "unpreconditioned"):
+        # the fraction bounds the solve's error through |b - A dv|; CG's
+        # default, preconditioned, residual says nothing of it
+        raise ConfigError("linear_system.step_error_fraction", fraction,
+                          "null unless solver.ksp_norm_type is unpreconditioned (the "
+                          "fraction bounds the solve's error through |b - A dv|; the size "
+                          "presets stop on it)")
     if "collisions" in config.effects and not config.colliders:
         raise ConfigError("effects", list(config.effects),
                           "the collisions effect needs at least one entry under colliders:")

@@ -692,6 +692,12 @@ class LinearSystemSpec:
                                       "a solver: section, off with one")
     pc_rebuild_every: int = setting(1, doc="rebuild the preconditioner every k-th solve, reuse "
                                     "it in between", at_least=1)
+    step_error_fraction: float | None = setting(
+        None, doc="one-solve steps of backward Euler and BDF-2: the solve stops where the "
+        "error it can leave in the positions is at most this fraction of the last step's "
+        "estimated local error (on the unpreconditioned residual, between 1e-6 and 1e-2 of "
+        "|b|; the first step and a step after a change of size use ksp_rtol); null: every "
+        "solve at ksp_rtol (docs/integrators.md, \"A solve as accurate as the step\")", above=0)
 
 
 @dataclass(frozen=True)
@@ -843,7 +849,8 @@ class SceneConfig:
         f"the prefix {OPTION_PREFIX}, which distcloth adds (ksp_rtol: 1e-8 is "
         f"-{OPTION_PREFIX}ksp_rtol 1e-8); they replace or extend the defaults "
         f"{dict(DEFAULT_SOLVER)}; no solver: section: CG with a preconditioner chosen by "
-        "problem size, ksp_rtol 1e-3 (1e-5 with collisions) and warm start "
+        "problem size, ksp_rtol 1e-3 (1e-5 with collisions) of the unpreconditioned "
+        "residual and warm start "
         "(distcloth/linalg/presets.py)",
         read="petsc_options")
     linear_system: LinearSystemSpec = section(LinearSystemSpec, doc="distcloth's own settings "

@@ -36,6 +36,8 @@ class StepResult:
     newton_residual: float = 0.0  # final relative Newton residual (0 for explicit steps)
     newton_converged: bool = True # False: the Newton loop used every iteration above tolerance
     stopped_early: bool = False   # the energy retry's Newton stopped once the step gained none
+    # (h, |e|_M of the step's local error estimate) if the scheme has one
+    local_error: tuple[float, float] | None = None
 
 
 class Integrator:

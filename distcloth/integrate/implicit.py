@@ -37,6 +37,7 @@ elements little against their size.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -168,12 +169,13 @@ class ImplicitScheme(Integrator):
             b = m * aff.d + aff.s * (f[:n] + kx[:n])
         alpha, beta = aff.s * aff.a_x, aff.s * aff.a_v
         data = ctx.assemble(alpha=alpha, beta=beta)
-        dv_owned, info = ctx.solve(data, b, cons, guess)
+        max_its = self.newton_iterations()
+        dv_owned, info = ctx.solve(data, b, cons, guess,
+                                   target=self._solve_target(ctx, state, h, aff, max_its))
         ksp_its, ksp_res = info.iterations, info.residual
         dv = ctx.local_array(dv_owned)
         reaction = info.reaction
         newton_its, rel, converged, stopped = 1, 0.0, True, False
-        max_its = self.newton_iterations()
         if max_its > 1:
             converged = False
             b0 = max(ctx.global_norm(b), 1e-300)
@@ -265,7 +267,38 @@ class ImplicitScheme(Integrator):
                           history=self.history(state, h), reaction=reaction,
                           newton_iterations=newton_its,
                           ksp_iterations=ksp_its, ksp_residual=ksp_res, newton_residual=rel,
-                          newton_converged=converged, stopped_early=stopped)
+                          newton_converged=converged, stopped_early=stopped,
+                          local_error=self._local_error_norm(ctx, state, h, x1))
+
+    def local_error(self, ctx, state, h, x1) -> np.ndarray | None:
+        """The step's local error estimated from its result x1 (owned rows),
+        or None where the scheme has no estimate."""
+        return None
+
+    def _local_error_norm(self, ctx, state, h, x1):
+        """(h, |e|_M) of the step's estimate, measured only where the solve
+        tolerance follows it (linear_system.step_error_fraction)."""
+        if self.cfg.linear_system.step_error_fraction is None:
+            return None
+        e = self.local_error(ctx, state, h, x1)
+        if e is None:
+            return None
+        m = ctx.mass[: ctx.n_owned, None]
+        return h, math.sqrt(float(ctx.global_sum(float(np.sum(m * e * e)))[0]))
+
+    def _solve_target(self, ctx, state, h, aff, max_its):
+        """|b - A dv| a one-solve step's solve may leave: step_error_fraction
+        of the last step's local error (a step of the same size: the error
+        moves slowly from step to step), or None (the configured tolerance).
+        The filtered matrix is at least M (its stiffness and damping parts
+        are positive semi-definite), so a solve that leaves the residual r
+        leaves an error |d|_M <= |r|_(M^-1) <= |r| / sqrt(m_min) in dv, and
+        a_x times that in the positions."""
+        fraction = self.cfg.linear_system.step_error_fraction
+        last = state.step_error
+        if fraction is None or max_its > 1 or last is None or last[0] != h:
+            return None
+        return fraction * last[1] * math.sqrt(ctx.min_mass()) / aff.a_x
 
     def _barrier_step(self, ctx, state, h, cons):
         """Newton on the step's incremental potential with body contact as a
@@ -394,6 +427,12 @@ class BackwardEuler(ImplicitScheme):
     def affine(self, ctx, state, h, f0, cons):
         return Affine(state.x + h * state.v, h, 1.0, np.zeros((ctx.n_owned, 3)), h)
 
+    def local_error(self, ctx, state, h, x1):
+        # against the explicit Euler predictor x0 + h v0 (error -h^2 a/2 + O(h^3))
+        # backward Euler's own error is +h^2 a/2: half their difference (Milne's device)
+        n = ctx.n_owned
+        return 0.5 * (x1 - state.x[:n] - h * state.v[:n])
+
 
 class ImplicitMidpoint(ImplicitScheme):
     """x1 = x0 + h (v0 + v1)/2, M (v1 - v0) = h f((x0 + x1)/2, (v0 + v1)/2):
@@ -479,6 +518,16 @@ class BDF2(ImplicitScheme):
 
     def history(self, state, h):
         return MultistepHistory(state.x.copy(), state.v.copy(), h)
+
+    def local_error(self, ctx, state, h, x1):
+        # Milne's device: BDF-2 leaves +2/9 h^3 x''' + O(h^4), the second-order
+        # predictor x_-1 + 2 h v0 (leapfrog) -1/3 h^3 x''', so the step's error
+        # is 2/5 of their difference (after a change of h: backward Euler's own)
+        hist = state.history
+        if hist is None or hist.h != h:
+            return BackwardEuler.local_error(self, ctx, state, h, x1)
+        n = ctx.n_owned
+        return 0.4 * (x1 - hist.x[:n] - 2.0 * h * state.v[:n])
 
     def held_path(self, state, h, rows):
         hist = state.history

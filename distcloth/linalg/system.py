@@ -24,6 +24,13 @@ from .log_events import logged
 from .petsc import PREFIX, libpetsc, petsc
 from .sgs32 import ATTR
 
+# an aimed solve's relative tolerance stays within these: below, round-off and
+# a cloth at rest (whose step error and |b| both vanish) would ask CG for
+# digits it cannot give; above, the loosest a Newton correction takes
+# (integrate/implicit.py, MAX_FORCING)
+AIMED_RTOL = 1.0e-6
+MAX_AIMED_RTOL = 1.0e-2
+
 
 class SolverFailure(Exception):
     pass
@@ -81,6 +88,7 @@ class LinearSystem:
         self.b = A.createVecLeft()
         self.y = A.createVecRight()
         self._held = None          # the warm start, kept aside while a correction is solved
+        self._target = None        # an absolute residual the next solves aim at (aimed)
         self.r = A.createVecLeft()
         self.ksp = PETSc.KSP().create(self.comm)
         self.ksp.setOptionsPrefix(PREFIX)
@@ -160,6 +168,17 @@ class LinearSystem:
         finally:
             self.ksp.setTolerances(rtol=old)
 
+    @contextmanager
+    def aimed(self, target: float | None):
+        """Solves inside stop where |b - A y| <= ``target`` (None: at the
+        configured relative tolerance), as a relative tolerance between
+        AIMED_RTOL and MAX_AIMED_RTOL of their own |b|; restored on exit."""
+        self._target = target
+        try:
+            yield
+        finally:
+            self._target = None
+
     def block_jacobi_blocks(self) -> int:
         """Local number of block-Jacobi blocks (0 if another preconditioner is in use)."""
         pc = self.ksp.getPC()
@@ -202,7 +221,15 @@ class LinearSystem:
         else:
             self.y.set(0.0)
             self.ksp.setInitialGuessNonzero(False)
-        self.ksp.solve(self.b, self.y)
+        configured = self.rtol
+        if self._target is not None:
+            bnorm = self.b.norm()
+            self.ksp.setTolerances(rtol=float(np.clip(self._target / bnorm, AIMED_RTOL,
+                                                      MAX_AIMED_RTOL)) if bnorm > 0 else configured)
+        try:
+            self.ksp.solve(self.b, self.y)
+        finally:
+            self.ksp.setTolerances(rtol=configured)
         reason = self.ksp.getConvergedReason()
         its = self.ksp.getIterationNumber()
         with logged("solve:check"):        # the true residual, whatever norm CG used
