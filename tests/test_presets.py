@@ -93,3 +93,16 @@ def test_the_preset_tolerance_bounds_the_true_residual(monkeypatch, preset):
     # 1.0 + round-off: CG stops on its own recurrence's residual, which the
     # true one follows to ~1e-12 relative in double precision
     assert 0 < worst <= presets.DEFAULT_RTOL * (1.0 + 1e-6), worst
+
+
+def test_barrier_scenes_keep_cg_s_own_residual():
+    # the barrier's Newton stops on the velocity change and solves to a forcing
+    # term: on the preconditioned residual it took fewer CG iterations (S2-81,
+    # 317²), so only the other scenes' solves stop on |b - A dv|
+    norm = "ksp_norm_type"
+    assert presets.choose({}, None, None, 1000, 1).options[norm] == "unpreconditioned"
+    assert presets.choose({}, None, None, 1000, 1, contact=True).options[norm] == \
+        "unpreconditioned"
+    assert norm not in presets.choose({}, None, None, 1000, 1, contact=True, barrier=True).options
+    # a scene's own solver: section is taken as written
+    assert norm not in presets.choose({"ksp_rtol": 1e-6}, None, None, 1000, 1).options

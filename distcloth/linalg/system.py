@@ -221,15 +221,10 @@ class LinearSystem:
         else:
             self.y.set(0.0)
             self.ksp.setInitialGuessNonzero(False)
-        configured = self.rtol
-        if self._target is not None:
-            bnorm = self.b.norm()
-            self.ksp.setTolerances(rtol=float(np.clip(self._target / bnorm, AIMED_RTOL,
-                                                      MAX_AIMED_RTOL)) if bnorm > 0 else configured)
-        try:
+        if self._target is None:
             self.ksp.solve(self.b, self.y)
-        finally:
-            self.ksp.setTolerances(rtol=configured)
+        else:
+            self._solve_aimed()
         reason = self.ksp.getConvergedReason()
         its = self.ksp.getIterationNumber()
         with logged("solve:check"):        # the true residual, whatever norm CG used
@@ -241,6 +236,19 @@ class LinearSystem:
             raise SolverFailure(f"linear solve did not converge: {_reason_name(reason)} "
                                 f"after {its} iterations, true relative residual {res:.3g}")
         return self.y.array.reshape(-1, 3).copy(), SolveInfo(its, reason, res)
+
+    def _solve_aimed(self) -> None:
+        """The solve at the relative tolerance that stops it at the aimed
+        absolute residual (within AIMED_RTOL and MAX_AIMED_RTOL of |b|)."""
+        configured = self.rtol
+        bnorm = self.b.norm()
+        if bnorm > 0:
+            self.ksp.setTolerances(rtol=float(np.clip(self._target / bnorm, AIMED_RTOL,
+                                                      MAX_AIMED_RTOL)))
+        try:
+            self.ksp.solve(self.b, self.y)
+        finally:
+            self.ksp.setTolerances(rtol=configured)
 
     def _better_than_zero(self, guess: np.ndarray) -> bool:
         """Put ``guess`` into y if its residual is below |b| (the solver's
