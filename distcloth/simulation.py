@@ -136,7 +136,7 @@ class Simulation:
             self.solver_choice = choose_solver(
                 cfg.solver_options, ls.mat_type, ls.warm_start, n_vertices, comm.size,
                 contact=cfg.has("collisions") or cfg.has("self_collision"),
-                barrier=cfg.has("collisions") and cfg.contact.model == "barrier")
+                aimed=ls.step_error_fraction is not None)
             self.system = LinearSystem(lay, self.pattern, comm, self.solver_choice.mat_type,
                                        self.solver_choice.warm_start, ls.pc_rebuild_every)
         self.pipeline = self._build_pipeline()

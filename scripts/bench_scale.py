@@ -56,7 +56,7 @@ SCENE = ROOT / "configs" / "tablecloth_sphere.yaml"
 SPHERE_TOP = 0.5          # the scene's sphere: centre z 0.25, radius 0.25
 
 
-def solver_settings(smooths: int = 1, barrier: bool = False):
+def solver_settings(smooths: int = 1):
     """CG + GAMG on AIJ, as the scene's solver: and linear_system: sections:
     distcloth's tuned GAMG (linalg/presets.py) with ``smooths`` prolongator
     smoothing steps (pc_gamg_agg_nsmooths; the preset's 1). 0, plain
@@ -70,11 +70,7 @@ def solver_settings(smooths: int = 1, barrier: bool = False):
     from distcloth.linalg.presets import PRECONDITIONERS
     options, mat_type = PRECONDITIONERS["gamg"]
     plain = {"pc_gamg_threshold": 0.02} if smooths == 0 else {}
-    # on the residual the presets stop on: the unpreconditioned one, CG's
-    # default, preconditioned, with contact as a barrier
-    norm = {} if barrier else {"ksp_norm_type": "unpreconditioned"}
-    return ({"ksp_type": "cg", **options, "pc_gamg_agg_nsmooths": smooths, **plain, "ksp_rtol": 1e-5,
-             **norm},
+    return ({"ksp_type": "cg", **options, "pc_gamg_agg_nsmooths": smooths, **plain, "ksp_rtol": 1e-5},
             {"mat_type": mat_type})
 
 
@@ -87,7 +83,7 @@ def scene(n: int, gap: float, step: float, out: str, every: int, smooths: int = 
     cloth["mesh"]["grid"]["resolution"] = [n, n]
     cloth["mesh"]["center"] = [0.0, 0.0, SPHERE_TOP + gap]
     cloth["material"]["stretch"] = 1000.0        # the peers' S2 membrane, N/m
-    solver, linear_system = solver_settings(smooths, barrier=contact == "barrier")
+    solver, linear_system = solver_settings(smooths)
     raw["solver"] = solver
     raw["linear_system"] = linear_system
     raw["time"] = {**raw["time"], "step": step, "end": 10.0}

@@ -850,7 +850,7 @@ class SceneConfig:
         f"-{OPTION_PREFIX}ksp_rtol 1e-8); they replace or extend the defaults "
         f"{dict(DEFAULT_SOLVER)}; no solver: section: CG with a preconditioner chosen by "
         "problem size, ksp_rtol 1e-3 (1e-5 with collisions) of the unpreconditioned "
-        "residual (the preconditioned one with contact as a barrier) and warm start "
+        "residual (CG's preconditioned one with collisions) and warm start "
         "(distcloth/linalg/presets.py)",
         read="petsc_options")
     linear_system: LinearSystemSpec = section(LinearSystemSpec, doc="distcloth's own settings "

@@ -50,15 +50,16 @@ PRECONDITIONERS = {
 # Jacobi's, 83.5 against 63.0 mm of error over 2 s at 5 ms, for more time;
 # on 41² with block Jacobi 46.6 against 38.3 mm).  PETSc's CG takes one norm
 # an iteration either way: the unpreconditioned one costs nothing more.
-# Except with contact as a barrier: its Newton judges convergence by the
-# velocity change, a solve's tolerance is only its forcing term, and on the
-# unpreconditioned residual the barrier's stiff contact rows took 21 % more
-# CG iterations on S2-81 (block Jacobi) and 1.6-1.9x the step time at 317²
-# (GAMG): it keeps CG's default, the preconditioned residual.
 # With collisions the contacts are constraints of the solve and the response
 # after it starts from its result: at 1e-3 the piling ribbon's deepest
 # penetration grew from within 70 % of the contact distance to 81 %
-# (tests/test_scene_penetration.py), so contact scenes keep 1e-5.
+# (tests/test_scene_penetration.py), so contact scenes keep 1e-5, and of
+# CG's own, preconditioned residual, which that was measured on: the stiff
+# contact rows dominate |b - A dv|, and on it the tablecloth at 317² (GAMG)
+# took 1.3x the step with contact as constraints and 1.6-1.9x as a barrier,
+# S2-81's barrier 21 % more CG iterations (the walking dress and S2-81's
+# constraints, block Jacobi, 7-8 % less time).  A solve aimed at the step's
+# error (linear_system.step_error_fraction) needs the unpreconditioned one.
 GAMG_FROM_VERTICES = {1: 10000, 2: 10000}
 DEFAULT_RTOL = 1.0e-3
 CONTACT_RTOL = 1.0e-5
@@ -85,11 +86,12 @@ def by_size(n_vertices: int, ranks: int) -> str:
 
 def choose(solver: dict, mat_type: str | None, warm_start: bool | None,
            n_vertices: int, ranks: int, contact: bool = False,
-           barrier: bool = False) -> SolverChoice:
+           aimed: bool = False) -> SolverChoice:
     """The scene's own ``solver:`` options if it wrote any (``solver`` not
     empty; then BAIJ and no warm start unless ``linear_system`` says so),
     else the preset by size, with CONTACT_RTOL if the scene has collisions,
-    on the unpreconditioned residual unless contact is a ``barrier``.
+    on the unpreconditioned residual without collisions or if a solve is
+    ``aimed`` at the step's error.
     An explicit ``linear_system.mat_type`` is kept either way: BAIJ forces
     block-Jacobi SGS (GAMG needs AIJ)."""
     if solver:
@@ -97,6 +99,6 @@ def choose(solver: dict, mat_type: str | None, warm_start: bool | None,
     name = by_size(n_vertices, ranks) if mat_type != "baij" else "bjacobi_sgs"
     options, preset_mat = PRECONDITIONERS[name]
     rtol = CONTACT_RTOL if contact else DEFAULT_RTOL
-    norm = {} if barrier else {"ksp_norm_type": "unpreconditioned"}
+    norm = {"ksp_norm_type": "unpreconditioned"} if aimed or not contact else {}
     return SolverChoice({"ksp_type": "cg", **options, "ksp_rtol": rtol, **norm},
                         mat_type or preset_mat, True if warm_start is None else warm_start, name)
