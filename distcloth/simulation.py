@@ -269,7 +269,7 @@ class Simulation:
         lam = self.stiffness_bound()
         kmax = self.comm.max(np.array([max((float(t.k.max()) for t in self.terms
                                             if hasattr(t, "k") and t.k.size), default=0.0)]))[0]
-        mmin = -self.comm.max(np.array([-float(self.mass[: self.n_owned].min())]))[0]
+        mmin = self.ctx.min_mass()
         factor = self.integrator.stability_factor
         limit = 0.9 * factor / math.sqrt(lam) if lam > 0 else math.inf
         paper = 0.4 * math.pi * math.sqrt(mmin / kmax) if kmax > 0 else math.inf
