@@ -7,13 +7,25 @@ from distcloth.linalg.petsc import PREFIX
 from test_physics import grid_scene, make_sim
 
 
+@pytest.mark.parametrize("contact", [False, True])
 @pytest.mark.parametrize("ranks", [1, 2, 3])
-def test_by_size_switches_to_gamg_at_the_measured_crossover(ranks):
+def test_by_size_switches_to_gamg_at_the_measured_crossover(ranks, contact):
     at = presets.GAMG_FROM_VERTICES[min(ranks, 2)]
-    assert presets.by_size(at - 1, ranks) == "bjacobi_sgs"
-    assert presets.by_size(at, ranks) == "gamg"
-    # more ranks never move the switch to larger problems
+    if contact:
+        at = max(at, presets.CONTACT_GAMG_FROM_VERTICES)
+    assert presets.by_size(at - 1, ranks, contact) == "bjacobi_sgs"
+    assert presets.by_size(at, ranks, contact) == "gamg"
+    # more ranks never move the switch to larger problems, collisions never to smaller
     assert presets.GAMG_FROM_VERTICES[2] <= presets.GAMG_FROM_VERTICES[1]
+    assert presets.CONTACT_GAMG_FROM_VERTICES >= presets.GAMG_FROM_VERTICES[min(ranks, 2)]
+
+
+def test_the_peer_tablecloth_keeps_block_jacobi_and_the_square_of_its_size_does_not():
+    # 81² = 6,561 vertices on two ranks: GAMG was 1.2x faster on the hanging
+    # square and 1.46x slower on the tablecloth in contact with the sphere
+    assert presets.choose({}, None, None, 81 * 81, 2).preset == "gamg"
+    assert presets.choose({}, None, None, 81 * 81, 2, contact=True).preset == "bjacobi_sgs"
+    assert presets.choose({}, None, None, 81 * 81, 1).preset == "bjacobi_sgs"
 
 
 def test_choose_keeps_what_the_scene_says():

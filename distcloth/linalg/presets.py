@@ -37,8 +37,8 @@ PRECONDITIONERS = {
 # from GAMG_FROM_VERTICES[ranks] vertices on; below, block-Jacobi SGS on
 # BAIJ is cheaper per step.  The grids' bending stiffness out of the plane
 # is biharmonic, which block Jacobi's iterations grow with fastest: on the
-# stiff hanging square GAMG ties at 5k vertices on one rank (1.2x faster on
-# two) and is 1.6-1.7x faster at 10k, 2.6-2.9x at 20k.  ksp_rtol: CG
+# stiff hanging square GAMG ties at 5k-8k vertices on one rank (1.1-1.3x
+# faster on two) and is 1.1-1.3x faster at 10k, 1.9-2.3x at 20k.  ksp_rtol: CG
 # stops at 1e-3 of |b|, with the previous solve as the start (warm start):
 # on the hanging square that moved positions by a few mm against a 1e-8
 # solve, against 73 mm of time-stepping error at 5 ms, for half the CG
@@ -60,7 +60,14 @@ PRECONDITIONERS = {
 # S2-81's barrier 21 % more CG iterations (the walking dress and S2-81's
 # constraints, block Jacobi, 7-8 % less time).  A solve aimed at the step's
 # error (linear_system.step_error_fraction) needs the unpreconditioned one.
-GAMG_FROM_VERTICES = {1: 10000, 2: 10000}
+# On two ranks GAMG's fewer iterations also save reductions: over whole 2 s
+# runs of the hanging square it was 1.09-1.20x faster from 71² (5,041
+# vertices) on, on one rank no faster below ~8,000 (0.88x at 71², 1.01x
+# at 81²).  A scene with collisions keeps block Jacobi below 10k: on S2-81
+# (6,561 vertices in contact) GAMG took 0.4x the CG iterations and 1.46x
+# the time.
+GAMG_FROM_VERTICES = {1: 10000, 2: 5000}
+CONTACT_GAMG_FROM_VERTICES = 10000
 DEFAULT_RTOL = 1.0e-3
 CONTACT_RTOL = 1.0e-5
 
@@ -78,10 +85,13 @@ class SolverChoice:
         return f"{self.preset}, chosen by problem size" if self.preset else "the scene's solver:"
 
 
-def by_size(n_vertices: int, ranks: int) -> str:
+def by_size(n_vertices: int, ranks: int, contact: bool = False) -> str:
     """The preconditioner (a PRECONDITIONERS name) for a cloth of this many
-    vertices on this many ranks."""
-    return "gamg" if n_vertices >= GAMG_FROM_VERTICES[min(ranks, 2)] else "bjacobi_sgs"
+    vertices on this many ranks, in a scene with or without collisions."""
+    at = GAMG_FROM_VERTICES[min(ranks, 2)]
+    if contact:
+        at = max(at, CONTACT_GAMG_FROM_VERTICES)
+    return "gamg" if n_vertices >= at else "bjacobi_sgs"
 
 
 def choose(solver: dict, mat_type: str | None, warm_start: bool | None,
@@ -96,7 +106,7 @@ def choose(solver: dict, mat_type: str | None, warm_start: bool | None,
     block-Jacobi SGS (GAMG needs AIJ)."""
     if solver:
         return SolverChoice(dict(solver), mat_type or "baij", bool(warm_start))
-    name = by_size(n_vertices, ranks) if mat_type != "baij" else "bjacobi_sgs"
+    name = by_size(n_vertices, ranks, contact) if mat_type != "baij" else "bjacobi_sgs"
     options, preset_mat = PRECONDITIONERS[name]
     rtol = CONTACT_RTOL if contact else DEFAULT_RTOL
     norm = {"ksp_norm_type": "unpreconditioned"} if aimed or not contact else {}
