@@ -51,14 +51,18 @@ class StepContext:
             if hasattr(t, "at_step_start"):
                 t.at_step_start(x0)
 
-    def potential(self, x, v, position_weight: float, velocity_weight: float) -> float:
+    def potential(self, x, v, position_weight: float, velocity_weight: float,
+                  dissipation_at=None) -> float:
         """Over the ranks: position_weight times the terms' potential energy at
         x plus velocity_weight times their dissipation potentials at v (the
-        parts of a step's incremental potential the forces are gradients of)."""
+        parts of a step's incremental potential the forces are gradients of),
+        the dissipation potentials taken with the positions ``dissipation_at``
+        if given (lagged, as friction's normal forces are) instead of x."""
+        at = x if dissipation_at is None else dissipation_at
         local = 0.0
         for t in self.terms:
             if self.pipeline.enabled(t.name):
-                local += position_weight * t.energy(x) + velocity_weight * t.dissipation(x, v)
+                local += position_weight * t.energy(x) + velocity_weight * t.dissipation(at, v)
         return float(self.global_sum(local)[0])
 
     def contact_step_bound(self, x, dx) -> float:
