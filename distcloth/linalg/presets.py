@@ -36,9 +36,13 @@ PRECONDITIONERS = {
 # scripts/bench_defaults.py).  GAMG's few iterations pay for its set-up
 # from GAMG_FROM_VERTICES[ranks] vertices on; below, block-Jacobi SGS on
 # BAIJ is cheaper per step.  The grids' bending stiffness out of the plane
-# is biharmonic, which block Jacobi's iterations grow with fastest: on the
-# stiff hanging square GAMG ties at 5k-8k vertices on one rank (1.1-1.3x
-# faster on two) and is 1.1-1.3x faster at 10k, 1.9-2.3x at 20k.  ksp_rtol: CG
+# is biharmonic, which block Jacobi's iterations grow with fastest.  Over
+# whole 2 s runs of the stiff hanging square GAMG was 1.08-1.20x faster on
+# two ranks from 71² (5,041 vertices) on, where its fewer iterations also
+# save reductions, and tied on one rank up to 10k (0.89-0.99x); 1.9-2.3x
+# faster at 20k on either.  A scene with collisions keeps block Jacobi below
+# 10k: on S2-81 (6,561 vertices in contact) GAMG took 0.4x the CG
+# iterations and 1.46x the time.  ksp_rtol: CG
 # stops at 1e-3 of |b|, with the previous solve as the start (warm start):
 # on the hanging square that moved positions by a few mm against a 1e-8
 # solve, against 73 mm of time-stepping error at 5 ms, for half the CG
@@ -60,12 +64,6 @@ PRECONDITIONERS = {
 # S2-81's barrier 21 % more CG iterations (the walking dress and S2-81's
 # constraints, block Jacobi, 7-8 % less time).  A solve aimed at the step's
 # error (linear_system.step_error_fraction) needs the unpreconditioned one.
-# On two ranks GAMG's fewer iterations also save reductions: over whole 2 s
-# runs of the hanging square it was 1.09-1.20x faster from 71² (5,041
-# vertices) on, on one rank no faster below ~8,000 (0.88x at 71², 1.01x
-# at 81²).  A scene with collisions keeps block Jacobi below 10k: on S2-81
-# (6,561 vertices in contact) GAMG took 0.4x the CG iterations and 1.46x
-# the time.
 GAMG_FROM_VERTICES = {1: 10000, 2: 5000}
 CONTACT_GAMG_FROM_VERTICES = 10000
 DEFAULT_RTOL = 1.0e-3
