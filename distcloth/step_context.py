@@ -34,14 +34,18 @@ class StepContext:
             self._min_mass = -float(self.global_max(-local)[0])
         return self._min_mass
 
-    def forces(self, x, v, want_jac: bool, start=None) -> np.ndarray:
+    def forces(self, x, v, want_jac: bool, start=None, dissipation_at=None) -> np.ndarray:
         """Sum of the enabled force terms on every local row (each term is a stage);
         with ``want_jac`` the terms keep what the system and products need.
         With ``start``: the force of a step from start to x, each term's
-        discrete gradient (``ForceTerm.evaluate_between``), v the midpoint's."""
+        discrete gradient (``ForceTerm.evaluate_between``), v the midpoint's.
+        With ``dissipation_at``: the dissipative terms' forces (damping, drag)
+        with these positions instead of x, lagged as in ``potential``."""
         f = np.zeros((self.n_local, 3))
+        lagged = () if dissipation_at is None else {t.name for t in self.terms if t.dissipative}
         for name in FORCE_STAGES:
-            self.pipeline.run(name, x, v, f, want_jac, start)
+            self.pipeline.run(name, dissipation_at if name in lagged else x, v, f, want_jac,
+                              start)
         return f
 
     def begin_step(self, x0) -> None:

@@ -302,7 +302,8 @@ class ContactModel:
         return BarrierContactTerm([c.query for c in self.colliders], offsets,
                                   [c.friction for c in self.colliders], self.never_contact, mass,
                                   self.n_owned, width, spec.barrier_stiffness, self.gravity_norm,
-                                  spec.static_speed)
+                                  spec.static_speed,
+                                  convex=[c.kind == "analytic" for c in self.colliders])
 
     def _add_layer_surfaces(self, model, layout, implicit: bool) -> None:
         """A collider per outer layer: the garments under it, with the

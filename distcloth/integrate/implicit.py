@@ -307,9 +307,10 @@ class ImplicitScheme(Integrator):
             Phi(dv) = 1/2 (dv - d)^T M (dv - d) + (s / a_x) U(x) + (s / a_v) R(v)
 
         with x = x_pred + a_x dv, v = v0 + a_v dv, U the potentials (barrier
-        included) and R the dissipation potentials (friction's normal forces
-        and every R's positions lagged at each iterate), so that grad Phi is
-        the residual g.  Every update is cut to
+        included) and R the dissipation potentials, whose positions
+        (friction's normal forces and directions, the damping's springs) are
+        lagged at the step's first iterate, so that Phi is one function
+        through the step and grad Phi the residual g.  Every update is cut to
         the fraction that keeps all vertices outside their contact distance
         (conservative advancement), then halved until Phi decreases (Armijo).
         The first iterate is the way from the start state to the predictor,
@@ -339,18 +340,23 @@ class ImplicitScheme(Integrator):
         def at(dv):
             return aff.x_pred + aff.a_x * dv, v0 + aff.a_v * dv
 
-        def merit(dv, iterate):
-            # the dissipation potentials with the iterate's positions, where
-            # the forces of Newton's direction were evaluated (lagged, as IPC
-            # lags friction): spring damping's R(x, v) turns with the springs'
-            # directions, a part of its gradient the damping force does not
-            # have.  Taken at each trial's positions, on the tablecloth at
-            # 317² that part outweighed the rest and the merit rose along
-            # Newton's own direction, down to fractions of 1e-9
+        # The dissipation potentials' positions, lagged for the whole step
+        # (IPC lags friction so, Li et al. 2020 §5): spring damping's R(x, v)
+        # turns with the springs' directions, a part of its gradient the
+        # damping force does not have.  Taken at each trial's positions, on
+        # the tablecloth at 317² that part outweighed the rest and the merit
+        # rose along Newton's own direction; lagged afresh at each iterate,
+        # Phi changed from one iterate to the next and Newton could cycle
+        # between two iterates, each a descent of the other's Phi (41²
+        # tablecloth: steps at the 50-iteration cap, docs/benchmarks.md)
+        lagged_at = at(dv)[0]
+        bar.lag(lagged_at)
+
+        def merit(dv):
             x, v = at(dv)
             dk = dv[:n] - aff.d
             return (0.5 * float(ctx.global_sum(float(np.sum(m * dk * dk)))[0])
-                    + ctx.potential(x, v, wx, wv, dissipation_at=iterate))
+                    + ctx.potential(x, v, wx, wv, dissipation_at=lagged_at))
 
         complement = np.eye(3)[None] - cons.S          # the constrained directions
         ksp_its, ksp_res, reaction = 0, 0.0, None
@@ -358,8 +364,7 @@ class ImplicitScheme(Integrator):
         f = None
         while newton_its < spec.newton_iterations:
             x, v = at(dv)
-            bar.lag(x)          # friction's normal forces where this iterate is
-            f = ctx.forces(x, v, want_jac=True)
+            f = ctx.forces(x, v, want_jac=True, dissipation_at=lagged_at)
             g = m * (dv[:n] - aff.d) - aff.s * f[:n]
             gnorm = ctx.global_norm(ctx.project(cons, g))
             b0 = gnorm if b0 is None else b0
@@ -380,12 +385,12 @@ class ImplicitScheme(Integrator):
             reaction = info.reaction
             step = ctx.local_array(delta)
             fraction = ctx.contact_step_bound(x, aff.a_x * step)
-            phi0 = merit(dv, x)
+            phi0 = merit(dv)
             slope = float(ctx.global_sum(float(np.sum(g * delta)))[0])
             trial = dv.copy()
             for _ in range(MAX_BARRIER_BACKTRACKS):
                 trial[:] = dv + fraction * step
-                if merit(trial, x) <= phi0 + ARMIJO * fraction * min(slope, 0.0):
+                if merit(trial) <= phi0 + ARMIJO * fraction * min(slope, 0.0):
                     break
                 fraction *= 0.5
             else:

@@ -67,6 +67,10 @@ class ForceTerm:
     def dissipation(self, x, v):
         return 0.0
 
+    # a force of the velocities alone, -d(dissipation)/dv, whose positions
+    # only orient it (StepContext.forces may lag them)
+    dissipative = False
+
     def max_strain(self, x):
         return 0.0
 

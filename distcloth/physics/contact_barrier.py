@@ -21,7 +21,7 @@ resting under its own weight sits in the outer part of the band, and one
 pressed harder by tension moves in until the log term holds it.
 
 Friction (IPC §5, in velocities): with the normal force lambda = kappa |b'(s)|
-and the normal n lagged (fixed at the start of each Newton iteration), the
+and the normal n lagged (fixed at the step's first iterate), the
 dissipation potential R = mu lambda f0(|P (v - u)|), P = I - n n^T and u the
 body's surface velocity, whose velocity gradient is a Coulomb force of size
 mu lambda f1(|v_t|) against the tangential slip v_t; f1 rises from 0 to 1 over
@@ -99,8 +99,12 @@ class BarrierContactTerm(ForceTerm):
     name = "force:contact"
 
     def __init__(self, queries, offsets, mu, excluded, mass, n_owned, width, stiffness,
-                 gravity, static_speed):
+                 gravity, static_speed, convex=None):
         self.queries = list(queries)
+        # per body: whether its signed distance is a convex function (a convex
+        # shape's is: the analytic ones), which step_bound uses
+        self.convex = (np.zeros(len(self.queries), dtype=bool) if convex is None
+                       else np.asarray(convex, dtype=bool).reshape(len(self.queries)))
         self.offsets = np.asarray(offsets, dtype=np.float64)
         self.mu = np.asarray(mu, dtype=np.float64)
         self.n_owned = int(n_owned)
@@ -219,9 +223,13 @@ class BarrierContactTerm(ForceTerm):
     def step_bound(self, x, dx, iterations: int = 12) -> np.ndarray:
         """Per owned row, the largest fraction t <= 1 of the move x -> x + dx
         along which the vertex keeps at least KEEP_GAP of its gap s at x
-        (conservative advancement, as IPC's additive CCD: a distance field is
-        1-Lipschitz, so a vertex at gap s can move s - KEEP_GAP s0 without
-        coming closer; each advance queries the gap again).  Vertices whose
+        (conservative advancement, as IPC's additive CCD; each advance
+        queries the gaps again).  Each body's gap along the move is bounded
+        below by a line through the current point: for a convex body its
+        tangent s + tau n.dx (a convex set's signed distance is convex, so
+        it lies above its tangents), which never holds back a vertex that
+        slides along the body or leaves it; for any other body, whose
+        distance field is only 1-Lipschitz, s - tau |dx|.  Vertices whose
         move is shorter than their gap are free at once."""
         n = self.n_owned
         length = np.linalg.norm(dx[:n], axis=1)
@@ -234,15 +242,23 @@ class BarrierContactTerm(ForceTerm):
         rows = np.nonzero(active)[0]
         floor = None
         for _ in range(iterations):
-            gap = np.full(rows.size, np.inf)
             xr = x[rows] + t[rows, None] * dx[rows]
+            gaps, closing = [], []
             for j, query in enumerate(self.queries):
-                phi, _, _ = query(xr, self.t, reach)
-                gap = np.minimum(gap, phi - self.offsets[j, rows])
-            gap = np.where(np.isfinite(gap), gap, reach)
+                phi, normal, _ = query(xr, self.t, reach)
+                gap = phi - self.offsets[j, rows]
+                gaps.append(np.where(np.isfinite(gap), gap, reach))
+                # how fast the lower bound falls per unit of t
+                closing.append(-np.einsum("ni,ni->n", normal, dx[rows]) if self.convex[j]
+                               else length[rows])
             if floor is None:
-                floor = KEEP_GAP * np.maximum(gap, 0.0)
-            advance = np.maximum(gap - floor, 0.0) / length[rows]
+                floor = KEEP_GAP * np.maximum(np.min(gaps, axis=0), 0.0)
+            advance = np.full(rows.size, np.inf)
+            for gap, speed in zip(gaps, closing):
+                closer = speed > 0.0
+                advance[closer] = np.minimum(advance[closer],
+                                             np.maximum(gap[closer] - floor[closer], 0.0)
+                                             / speed[closer])
             t[rows] = np.minimum(1.0, t[rows] + advance)
             keep = (t[rows] < 1.0) & (advance > 1e-3 * (1.0 - t[rows]))
             rows, floor = rows[keep], floor[keep]

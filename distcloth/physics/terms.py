@@ -75,6 +75,7 @@ class SpringTerm(_SpringSet):
 
 class SpringDampingTerm(_SpringSet):
     """Damping along every spring on the relative velocity of its ends."""
+    dissipative = True
 
     def __init__(self, springs, rest, damping, weight=None):
         super().__init__("force:damping", springs, rest)
@@ -116,6 +117,7 @@ class GravityTerm(ForceTerm):
 class DragTerm(ForceTerm):
     """Linear air drag f = -drag * area * v on each vertex."""
     name = "force:drag"
+    dissipative = True
 
     def __init__(self, area, drag, n_owned):
         self.coef = drag * np.asarray(area, dtype=np.float64)
