@@ -187,6 +187,29 @@ def test_the_stiff_tablecloth_lands_on_the_sphere_with_20_ms_steps():
     assert np.max(z) == pytest.approx(0.505, abs=2.5e-3)   # on the sphere's top, in the band
 
 
+def test_the_newton_line_search_evaluates_phi_once_at_each_point():
+    # Phi at an iterate is the value its line search accepted (one Phi a
+    # step): evaluating it again there is a whole potential's cost, ~5 % of an
+    # iteration at 100k vertices (docs/benchmarks.md)
+    sim = make_sim(_sphere_scene(9, 0.02, 0.3), comm=MPI.COMM_WORLD)
+    seen, repeats = [], 0
+    potential = sim.ctx.potential
+
+    def counted(x, v, *args, **kwargs):
+        nonlocal repeats
+        key = (np.asarray(x).tobytes(), np.asarray(v).tobytes())
+        repeats += key in seen
+        seen.append(key)
+        return potential(x, v, *args, **kwargs)
+
+    sim.ctx.potential = counted
+    newton = [sim.step()["newton_iterations"] for _ in range(12)]
+    sim.destroy()
+    assert sum(newton) >= len(newton) + 6     # the landing takes several iterations a step
+    assert len(seen) >= sum(newton)           # every iteration tries a point
+    assert repeats == 0
+
+
 def test_a_stop_at_a_large_step_onto_a_body_names_the_barrier():
     # the same landing at 33 ms with contact as constraints and no Newton
     # retry: the linearised landing step gains energy (docs/integrators.md,

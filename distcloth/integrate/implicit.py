@@ -361,7 +361,7 @@ class ImplicitScheme(Integrator):
         complement = np.eye(3)[None] - cons.S          # the constrained directions
         ksp_its, ksp_res, reaction = 0, 0.0, None
         newton_its, converged, rel, b0 = 0, False, 0.0, None
-        f = None
+        f, phi_dv = None, None
         while newton_its < spec.newton_iterations:
             x, v = at(dv)
             f = ctx.forces(x, v, want_jac=True, dissipation_at=lagged_at)
@@ -385,12 +385,14 @@ class ImplicitScheme(Integrator):
             reaction = info.reaction
             step = ctx.local_array(delta)
             fraction = ctx.contact_step_bound(x, aff.a_x * step)
-            phi0 = merit(dv)
+            # Phi at dv: the last accepted trial's value (one Phi a step), else evaluated
+            phi0 = merit(dv) if phi_dv is None else phi_dv
             slope = float(ctx.global_sum(float(np.sum(g * delta)))[0])
             trial = dv.copy()
             for _ in range(MAX_BARRIER_BACKTRACKS):
                 trial[:] = dv + fraction * step
-                if merit(trial) <= phi0 + ARMIJO * fraction * min(slope, 0.0):
+                phi_dv = merit(trial)
+                if phi_dv <= phi0 + ARMIJO * fraction * min(slope, 0.0):
                     break
                 fraction *= 0.5
             else:
