@@ -23,9 +23,10 @@ import pytest
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-from distcloth.physics.contact_barrier import (HALF_WIDTH_SLOPE, barrier, barrier_curvature,
-                                               barrier_slope, slip_damping, slip_force,
-                                               slip_potential)
+from distcloth.integrate.implicit import _cut_per_vertex
+from distcloth.physics.contact_barrier import (HALF_WIDTH_SLOPE, KEEP_GAP, barrier,
+                                               barrier_curvature, barrier_slope, slip_damping,
+                                               slip_force, slip_potential)
 from conftest import ROOT, run_cli
 from test_physics import discrete_free_fall, gather_positions, grid_scene, make_sim
 
@@ -208,6 +209,34 @@ def test_the_newton_line_search_evaluates_phi_once_at_each_point():
     assert sum(newton) >= len(newton) + 6     # the landing takes several iterations a step
     assert len(seen) >= sum(newton)           # every iteration tries a point
     assert repeats == 0
+
+
+def test_a_vertex_closing_on_a_body_holds_back_only_itself():
+    # the flat 9 x 9 sheet 95 mm above the sphere's top, moved 0.2 m down:
+    # the vertices over the sphere would pass into it, the rest not
+    sim = make_sim(_sphere_scene(9, 0.02, 0.3), comm=MPI.COMM_WORLD)
+    ctx = sim.ctx
+    n = ctx.n_owned
+    x = sim.state.x.copy()
+    down = np.zeros_like(x)
+    down[:, 2] = -0.2
+    own = ctx.barrier.step_bound(x, down)
+    cut = _cut_per_vertex(ctx, x, down, -down[:n], 1.0)
+    held = MPI.COMM_WORLD.allreduce(int(np.sum(own < 1.0)))
+    free = MPI.COMM_WORLD.allreduce(int(np.sum(own == 1.0)))
+    # the one held back goes its own way, a tenth of its gap short (the
+    # centre's exactly: the tangent of the sphere's top is its distance);
+    # the others all of theirs, and the ghosts carry their owners' cut
+    np.testing.assert_allclose(cut[:n], down[:n] * own[:, None], rtol=0, atol=1e-15)
+    centre = np.linalg.norm(x[:n, :2], axis=1) < 1e-9
+    np.testing.assert_allclose(own[centre], (1.0 - KEEP_GAP) * (0.6 - 0.505) / 0.2, rtol=1e-9)
+    np.testing.assert_array_equal(ctx.local_array(cut[:n]), cut)
+    # a cut that does not lower Phi (its gradient along the move): not taken
+    same = _cut_per_vertex(ctx, x, down, down[:n], 1.0)
+    sim.destroy()
+    assert held >= 5 and free >= 40
+    assert np.all(_gaps(x[:n] + cut[:n]) >= KEEP_GAP * _gaps(x[:n]) - 1e-12)
+    np.testing.assert_array_equal(same, down)
 
 
 def test_a_stop_at_a_large_step_onto_a_body_names_the_barrier():
