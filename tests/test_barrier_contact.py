@@ -221,7 +221,7 @@ def test_a_vertex_closing_on_a_body_holds_back_only_itself():
     down = np.zeros_like(x)
     down[:, 2] = -0.2
     own = ctx.barrier.step_bound(x, down)
-    cut = _cut_per_vertex(ctx, x, down, -down[:n], 1.0)
+    cut, fraction = _cut_per_vertex(ctx, x, down, -down[:n], 1.0)
     held = MPI.COMM_WORLD.allreduce(int(np.sum(own < 1.0)))
     free = MPI.COMM_WORLD.allreduce(int(np.sum(own == 1.0)))
     # the one held back goes its own way, a tenth of its gap short (the
@@ -232,11 +232,14 @@ def test_a_vertex_closing_on_a_body_holds_back_only_itself():
     np.testing.assert_allclose(own[centre], (1.0 - KEEP_GAP) * (0.6 - 0.505) / 0.2, rtol=1e-9)
     np.testing.assert_array_equal(ctx.local_array(cut[:n]), cut)
     # a cut that does not lower Phi (its gradient along the move): not taken
-    same = _cut_per_vertex(ctx, x, down, down[:n], 1.0)
+    same, whole = _cut_per_vertex(ctx, x, down, down[:n], 1.0)
+    least = -MPI.COMM_WORLD.allreduce(-float(np.min(own)), op=MPI.MAX)
     sim.destroy()
     assert held >= 5 and free >= 40
     assert np.all(_gaps(x[:n] + cut[:n]) >= KEEP_GAP * _gaps(x[:n]) - 1e-12)
     np.testing.assert_array_equal(same, down)
+    assert whole == least                  # cut as a whole, by the least fraction
+    assert 0.95 <= fraction <= 1.0         # the cut moves are (nearly) free
 
 
 def test_a_stop_at_a_large_step_onto_a_body_names_the_barrier():

@@ -385,8 +385,7 @@ class ImplicitScheme(Integrator):
             ksp_its += info.iterations
             ksp_res = max(ksp_res, info.residual)
             reaction = info.reaction
-            step = _cut_per_vertex(ctx, x, ctx.local_array(delta), g, aff.a_x)
-            fraction = ctx.contact_step_bound(x, aff.a_x * step)
+            step, fraction = _cut_per_vertex(ctx, x, ctx.local_array(delta), g, aff.a_x)
             # Phi at dv: the last accepted trial's value (one Phi a step), else evaluated
             phi0 = merit(dv) if phi_dv is None else phi_dv
             slope = float(ctx.global_sum(float(np.sum(g * step[:n])))[0])
@@ -413,12 +412,13 @@ class ImplicitScheme(Integrator):
 
 
 def _cut_per_vertex(ctx, x, step, g, a_x):
-    """Newton's update ``step`` (local rows, ghosts filled) with each owned
-    vertex's part cut to the fraction of it that keeps the vertex a tenth of
-    its gap outside every body (the barrier's conservative bound, vertex by
-    vertex), if any is cut and the result is still a descent direction of
-    Phi (``g`` its gradient on the owned rows); else ``step`` as it is, for
-    the caller to cut as a whole.  Cut as a whole, the vertex closest to a
+    """(direction, fraction of it that keeps every vertex outside): Newton's
+    update ``step`` (local rows, ghosts filled) with each owned vertex's part
+    cut to the fraction of it that keeps the vertex a tenth of its gap
+    outside every body (the barrier's conservative bound, vertex by vertex),
+    if any is cut and the result is still a descent direction of Phi (``g``
+    its gradient on the owned rows); else ``step`` as it is, with the least
+    vertex's fraction, cut as a whole.  Cut as a whole, the vertex closest to a
     body holds the whole cloth back, one vertex after another through a
     landing: on the tablecloth at 317² five to eight of a landing step's
     seven to eleven iterations were cut to 0.07-0.7 of themselves
@@ -426,14 +426,18 @@ def _cut_per_vertex(ctx, x, step, g, a_x):
     stretch toward it; Phi's line search weighs that."""
     n = ctx.n_owned
     own = ctx.barrier.step_bound(x, a_x * step)
-    if ctx.global_max(float(np.any(own < 1.0)))[0] <= 0.0:
-        return step
+    least = -float(ctx.global_max(-float(np.min(own, initial=1.0)))[0])
+    if least >= 1.0:
+        return step, 1.0
     cut = step.copy()
     cut[:n] *= own[:, None]
     ctx.update_ghosts(cut)
     if float(ctx.global_sum(float(np.sum(g * cut[:n])))[0]) < 0.0:
-        return cut
-    return step
+        # the bound again along the cut moves (a vertex's own fraction was
+        # found by advancing along its whole move: the cut one may end a
+        # little short of it)
+        return cut, ctx.contact_step_bound(x, a_x * cut)
+    return step, least
 
 
 def _outside(barrier, x):
