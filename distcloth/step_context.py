@@ -72,10 +72,15 @@ class StepContext:
     def contact_step_bound(self, x, dx) -> float:
         """The largest fraction <= 1 of the move dx (owned rows) that keeps every
         vertex outside its contact distance, over the ranks (1 without a barrier)."""
+        return self.contact_step_fractions(x, dx)[1]
+
+    def contact_step_fractions(self, x, dx) -> tuple[np.ndarray, float]:
+        """Each owned vertex's largest fraction <= 1 of its move dx that keeps it
+        outside its contact distance, and the least of them over the ranks."""
         if self.barrier is None:
-            return 1.0
-        local = float(np.min(self.barrier.step_bound(x, dx), initial=1.0))
-        return -float(self.global_max(-local)[0])
+            return np.ones(self.n_owned), 1.0
+        own = self.barrier.step_bound(x, dx)
+        return own, -float(self.global_max(-float(np.min(own, initial=1.0)))[0])
 
     def stiffness_product(self, w) -> np.ndarray:
         """(df/dx) w at the last evaluation, on every local row."""

@@ -425,8 +425,7 @@ def _cut_per_vertex(ctx, x, step, g, a_x):
     (docs/benchmarks.md).  Cut vertex by vertex, a vertex's neighbours may
     stretch toward it; Phi's line search weighs that."""
     n = ctx.n_owned
-    own = ctx.barrier.step_bound(x, a_x * step)
-    least = -float(ctx.global_max(-float(np.min(own, initial=1.0)))[0])
+    own, least = ctx.contact_step_fractions(x, a_x * step)
     if least >= 1.0:
         return step, 1.0
     cut = step.copy()
