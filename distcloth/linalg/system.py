@@ -1,11 +1,12 @@
 """The implicit system in PETSc: fixed-pattern blocked matrix, KSP, checks.
 
 The matrix is BAIJ with 3x3 blocks by default (EG07 tutorial, Part 1 §5.7), or AIJ
-with block size 3 (needed by GAMG); both are filled through the same blocked
-CSR call from the pattern's value array.  Its sparsity is preallocated
-exactly and frozen (NEW_NONZERO_ALLOCATION_ERR): every step only overwrites
-values.  Rows are set only by their owner (NO_OFF_PROC_ENTRIES), so assembly
-sends nothing.
+with block size 3 (needed by GAMG); both are first filled through the same
+blocked CSR call from the pattern's value array, and AIJ afterwards straight
+into its storage (linalg/aij_values.py: PETSc's blocked call on AIJ inserts a
+scalar at a time).  Its sparsity is preallocated exactly and frozen
+(NEW_NONZERO_ALLOCATION_ERR): every step only overwrites values.  Rows are
+set only by their owner (NO_OFF_PROC_ENTRIES), so assembly sends nothing.
 
 Default solver: CG preconditioned by block Jacobi over the ranks with SOR on
 each rank's diagonal block (EG07 tutorial, Part 1 §5.6).  PETSc's BAIJ SOR allows only
@@ -20,6 +21,7 @@ import ctypes
 
 import numpy as np
 
+from .aij_values import AIJBlockWriter
 from .log_events import logged
 from .petsc import PREFIX, libpetsc, petsc
 from .sgs32 import ATTR
@@ -51,6 +53,7 @@ class LinearSystem:
                  pc_rebuild_every: int = 1):
         PETSc = petsc()
         self.comm = comm.mpi_comm
+        self._dcomm = comm
         self.pattern = pattern
         n, N = layout.n_owned, int(layout.ownership[-1])
         self.n_owned = n
@@ -76,6 +79,9 @@ class LinearSystem:
         A.setOption(PETSc.Mat.Option.ROW_ORIENTED, False)
         self.A = A
         self.mat_type = mat_type
+        # AIJ: after the first fill, values go straight into its storage
+        self._aij_writer = None
+        self._aij_slots = (l2g, layout.n_owned) if mat_type != "baij" else None
         self.warm_start = warm_start
         # rebuild the preconditioner every k-th solve and reuse it between: an
         # SPD preconditioner of a slightly older matrix keeps CG correct (only
@@ -95,21 +101,41 @@ class LinearSystem:
 
     def set_values(self, data: np.ndarray) -> None:
         """Put the owned rows' blocks ``data`` (nnzb, 3, 3) into the matrix;
-        ``data`` is transposed in place for the call and back after, not
-        copied: at 1M vertices a copy is 0.7 GB per rank."""
+        through the blocked CSR call ``data`` is transposed in place for the
+        call and back after, not copied: at 1M vertices a copy is 0.7 GB per
+        rank."""
         if not data.flags.c_contiguous:
             data = np.ascontiguousarray(data)
-        _transpose_blocks(data)
-        try:
-            self.A.setValuesBlockedCSR(self.indptr, self.gcols, data)
-        finally:
+        if self._aij_writer is not None:
+            self._aij_writer.write(data)
+        else:
             _transpose_blocks(data)
-        self.A.assemble()
+            try:
+                self.A.setValuesBlockedCSR(self.indptr, self.gcols, data)
+            finally:
+                _transpose_blocks(data)
+            self.A.assemble()
+            if self._aij_slots is not None:
+                self._aij_writer = self._aij_block_writer()
+                self._aij_slots = None
         # the same blocks for preconditioners written in Python (sgs32) only:
         # held here, they would outlive the step (two filtered copies at peak)
         if petsc().Options().getString(PREFIX + "pc_type", "") == "python":
             self.A.setAttr(ATTR, (self.pattern.indptr, self.pattern.block_cols, data,
                                   self.n_owned))
+
+    def _aij_block_writer(self):
+        """The writer for later fills, if every rank's storage is laid out as
+        its pattern says (else all keep the blocked call)."""
+        lib = libpetsc()
+        if lib is None:
+            return None
+        l2g, n_owned = self._aij_slots
+        writer = AIJBlockWriter(lib, self.A, self.pattern.block_rows, self.pattern.block_cols,
+                                n_owned, l2g)
+        if self._dcomm.max(np.array([0.0 if writer.matches else 1.0]))[0] > 0:
+            return None
+        return writer
 
     def configure(self) -> None:
         """Apply the options database to the KSP and set it up (first matrix must be set)."""
