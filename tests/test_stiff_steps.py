@@ -59,6 +59,20 @@ def flag_corrections(monkeypatch):
     return flag
 
 
+def log_solves(monkeypatch, what):
+    """A list that gets (a Newton correction?, what(system)) as each solve begins."""
+    seen = []
+    solve = LinearSystem.solve
+    flag = flag_corrections(monkeypatch)
+
+    def logged(self, rhs, guess=None):
+        seen.append((flag["on"], what(self)))
+        return solve(self, rhs, guess)
+
+    monkeypatch.setattr(LinearSystem, "solve", logged)
+    return seen
+
+
 def bdf2_errors(comm, n=11, end=0.2):
     ref, _ = run(hanging_square(n, 0.001, "bdf2", end, newton_iterations=30,
                                 newton_tolerance=1e-10), comm)
@@ -161,19 +175,33 @@ def test_a_newton_correction_leaves_the_warm_start(monkeypatch):
     assert not any(c[3] for c in corrections)
 
 
+def test_newton_corrections_keep_the_steps_multigrid_preconditioner(monkeypatch):
+    # GAMG is set up for each step's first solve and kept for its Newton
+    # corrections (an SPD preconditioner of the step's first matrix: CG stays
+    # correct); block Jacobi, whose set-up costs nothing, is never kept
+    # (a correction?, the solve reuses the preconditioner?)
+    seen = log_solves(monkeypatch, lambda system: system._reuse_next)
+    raw = hanging_square(11, 0.01, "bdf2", 0.05, ksp_rtol=1e-3, newton_iterations=3,
+                         newton_tolerance=1e-9)
+    raw["solver"].update({"pc_type": "gamg", "mg_levels_ksp_type": "richardson",
+                          "mg_levels_pc_type": "sor"})
+    raw["linear_system"] = {"mat_type": "aij"}
+    run(raw, Comm())
+    assert len(seen) == 15 and sum(c for c, _ in seen) == 10
+    assert all(kept == corr for corr, kept in seen), seen
+    seen.clear()
+    del raw["solver"]["pc_type"], raw["solver"]["mg_levels_ksp_type"], \
+        raw["solver"]["mg_levels_pc_type"], raw["linear_system"]
+    run(raw, Comm())
+    assert len(seen) == 15 and not any(kept for _, kept in seen)
+
+
 def test_newton_corrections_are_solved_inexactly_until_the_last(monkeypatch):
     # a scene's own Newton iterations solve each correction only as far as the
     # residual is small (Eisenstat and Walker 1996), and the last one allowed
     # at the scene's ksp_rtol unless a looser solve reaches the tolerance
-    seen = []      # (a correction?, the solve's relative tolerance)
-    solve = LinearSystem.solve
-    flag = flag_corrections(monkeypatch)
-
-    def logged(self, rhs, guess=None):
-        seen.append((flag["on"], self.rtol))
-        return solve(self, rhs, guess)
-
-    monkeypatch.setattr(LinearSystem, "solve", logged)
+    # (a correction?, the solve's relative tolerance)
+    seen = log_solves(monkeypatch, lambda system: system.rtol)
     raw = hanging_square(11, 0.01, "bdf2", 0.1, ksp_rtol=1e-3, newton_iterations=4,
                          newton_tolerance=1e-4)
     comm = Comm()
