@@ -141,7 +141,9 @@ class Simulation:
                                        self.solver_choice.warm_start, ls.pc_rebuild_every)
         self.pipeline = self._build_pipeline()
         self.ctx = StepContext(self.n_owned, self.mass, self.terms, self.pipeline, self.ghosts, comm,
-                               barrier=self.contact.barrier)
+                               barrier=self.contact.barrier,
+                               contact_constraints=cfg.has("self_collision") or (
+                                   cfg.has("collisions") and self.contact.barrier is None))
         tc = cfg.time
         # stitch springs shortening do work on the garment: a sewing scene is
         # driven until its seams are welded (the welded simulation is passive)

@@ -16,9 +16,11 @@ from .stages import FORCE_STAGES
 
 class StepContext:
     def __init__(self, n_owned: int, mass: np.ndarray, terms, pipeline, ghosts, comm,
-                 barrier=None):
+                 barrier=None, contact_constraints=False):
         self.n_owned = n_owned
         self.barrier = barrier           # body contact as a barrier term, or None
+        # collisions are constraints of the step's solves (contact passes)
+        self.contact_constraints = contact_constraints
         self.n_local = mass.shape[0]
         self.mass = mass                 # (n_local,) lumped vertex masses
         self.terms = terms

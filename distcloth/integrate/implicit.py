@@ -223,9 +223,11 @@ class ImplicitScheme(Integrator):
                 forcing = min(MAX_FORCING, enough if last_allowed else max(rel, enough))
                 # a multigrid preconditioner of the step's first solve serves
                 # its corrections: on S1-101 (GAMG) a set-up per correction
-                # cost 5.9 s of a 2 s run and saved no CG iterations
+                # cost 5.9 s of a 2 s run and saved no CG iterations; not with
+                # contact as constraints, where on the tablecloth at 317² a
+                # step's last solve took 18 % more CG iterations with it
                 delta, info = ctx.solve(data, -g, relaxed, rtol=forcing, correction=True,
-                                        keep_preconditioner=True)
+                                        keep_preconditioner=not ctx.contact_constraints)
                 ksp_its += info.iterations
                 ksp_res = max(ksp_res, info.residual)
                 newton_its += 1
