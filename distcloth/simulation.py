@@ -130,12 +130,13 @@ class Simulation:
         for t in self.terms:
             t.bind(self.pattern)
         self.system = None
+        collides = cfg.has("collisions") or cfg.has("self_collision")
         if self.integrator.implicit:
             ls = cfg.linear_system
             # the scene's solver: or, without one, the preset for its size
             self.solver_choice = choose_solver(
                 cfg.solver_options, ls.mat_type, ls.warm_start, n_vertices, comm.size,
-                contact=cfg.has("collisions") or cfg.has("self_collision"),
+                contact=collides,
                 aimed=ls.step_error_fraction is not None)
             self.system = LinearSystem(lay, self.pattern, comm, self.solver_choice.mat_type,
                                        self.solver_choice.warm_start, ls.pc_rebuild_every)

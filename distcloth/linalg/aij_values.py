@@ -19,6 +19,8 @@ import ctypes
 import numpy as np
 from numba import njit
 
+from .petsc import check_call
+
 
 @njit(cache=True)
 def _scatter_blocks(data, part, base, width, out_diag, out_off):
@@ -80,7 +82,7 @@ class AIJBlockWriter:
         if not self.mpi:
             return ctypes.c_void_p(self.A.handle), None
         ad, ao, colmap = ctypes.c_void_p(), ctypes.c_void_p(), ctypes.c_void_p()
-        _check(self.lib.MatMPIAIJGetSeqAIJ(ctypes.c_void_p(self.A.handle), ctypes.byref(ad),
+        check_call(self.lib.MatMPIAIJGetSeqAIJ(ctypes.c_void_p(self.A.handle), ctypes.byref(ad),
                                            ctypes.byref(ao), ctypes.byref(colmap)),
                "MatMPIAIJGetSeqAIJ")
         return ad, ao
@@ -93,17 +95,12 @@ class AIJBlockWriter:
                 arrays.append(np.empty(0))
                 continue
             p = ctypes.POINTER(ctypes.c_double)()
-            _check(self.lib.MatSeqAIJGetArray(mat, ctypes.byref(p)), "MatSeqAIJGetArray")
+            check_call(self.lib.MatSeqAIJGetArray(mat, ctypes.byref(p)), "MatSeqAIJGetArray")
             pointers.append((mat, p))
             arrays.append(np.ctypeslib.as_array(p, shape=(int(nnz),)) if nnz else np.empty(0))
         try:
             _scatter_blocks(data, self.part, self.base, self.width, arrays[0], arrays[1])
         finally:
             for mat, p in pointers:
-                _check(self.lib.MatSeqAIJRestoreArray(mat, ctypes.byref(p)), "MatSeqAIJRestoreArray")
+                check_call(self.lib.MatSeqAIJRestoreArray(mat, ctypes.byref(p)), "MatSeqAIJRestoreArray")
         self.A.assemble()
-
-
-def _check(err: int, call: str) -> None:
-    if err != 0:
-        raise RuntimeError(f"{call} failed with PETSc error {err}")

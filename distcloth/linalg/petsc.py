@@ -77,6 +77,12 @@ def libpetsc():
     return None
 
 
+def check_call(err: int, call: str) -> None:
+    """Raise if a PETSc call made through ``libpetsc()`` returned an error code."""
+    if err != 0:
+        raise RuntimeError(f"{call} failed with PETSc error {err}")
+
+
 def insert_scene_options(options: dict, from_command_line: set[str]) -> list[str]:
     """Put the scene's solver options into the database unless the command line
     set them; returns the names inserted, for ``remove_options`` when done."""

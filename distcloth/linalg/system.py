@@ -23,7 +23,7 @@ import numpy as np
 
 from .aij_values import AIJBlockWriter
 from .log_events import logged
-from .petsc import PREFIX, libpetsc, petsc
+from .petsc import PREFIX, check_call, libpetsc, petsc
 from .sgs32 import ATTR
 
 # an aimed solve's relative tolerance stays within these: below, round-off and
@@ -81,7 +81,7 @@ class LinearSystem:
         self.mat_type = mat_type
         # AIJ: after the first fill, values go straight into its storage
         self._aij_writer = None
-        self._aij_slots = (l2g, layout.n_owned) if mat_type != "baij" else None
+        self._aij_slots = l2g if mat_type != "baij" else None
         self.warm_start = warm_start
         # rebuild the preconditioner every k-th solve and reuse it between: an
         # SPD preconditioner of a slightly older matrix keeps CG correct (only
@@ -130,9 +130,8 @@ class LinearSystem:
         lib = libpetsc()
         if lib is None:
             return None
-        l2g, n_owned = self._aij_slots
         writer = AIJBlockWriter(lib, self.A, self.pattern.block_rows, self.pattern.block_cols,
-                                n_owned, l2g)
+                                self.n_owned, self._aij_slots)
         if self._dcomm.max(np.array([0.0 if writer.matches else 1.0]))[0] > 0:
             return None
         return writer
@@ -322,8 +321,7 @@ def bjacobi_local_blocks(pc) -> int:
     n, first, ksps = itype(0), itype(0), ctypes.c_void_p(0)
     err = lib.PCBJacobiGetSubKSP(ctypes.c_void_p(pc.handle), ctypes.byref(n), ctypes.byref(first),
                                  ctypes.byref(ksps))
-    if err != 0:
-        raise RuntimeError(f"PCBJacobiGetSubKSP failed with PETSc error {err}")
+    check_call(err, "PCBJacobiGetSubKSP")
     return int(n.value)
 
 
