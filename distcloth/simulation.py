@@ -137,7 +137,8 @@ class Simulation:
             self.solver_choice = choose_solver(
                 cfg.solver_options, ls.mat_type, ls.warm_start, n_vertices, comm.size,
                 contact=collides,
-                aimed=ls.step_error_fraction is not None)
+                aimed=ls.step_error_fraction is not None,
+                newton=self.integrator.newton_iterations() > 1)
             self.system = LinearSystem(lay, self.pattern, comm, self.solver_choice.mat_type,
                                        self.solver_choice.warm_start, ls.pc_rebuild_every)
         self.pipeline = self._build_pipeline()

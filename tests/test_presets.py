@@ -7,17 +7,34 @@ from distcloth.linalg.petsc import PREFIX
 from test_physics import grid_scene, make_sim
 
 
+@pytest.mark.parametrize("newton", [False, True])
 @pytest.mark.parametrize("contact", [False, True])
 @pytest.mark.parametrize("ranks", [1, 2, 3])
-def test_by_size_switches_to_gamg_at_the_measured_crossover(ranks, contact):
-    at = presets.GAMG_FROM_VERTICES[min(ranks, 2)]
+def test_by_size_switches_to_gamg_at_the_measured_crossover(ranks, contact, newton):
+    table = presets.NEWTON_GAMG_FROM_VERTICES if newton else presets.GAMG_FROM_VERTICES
+    at = table[min(ranks, 2)]
     if contact:
         at = max(at, presets.CONTACT_GAMG_FROM_VERTICES)
-    assert presets.by_size(at - 1, ranks, contact) == "bjacobi_sgs"
-    assert presets.by_size(at, ranks, contact) == "gamg"
-    # more ranks never move the switch to larger problems, collisions never to smaller
-    assert presets.GAMG_FROM_VERTICES[2] <= presets.GAMG_FROM_VERTICES[1]
-    assert presets.CONTACT_GAMG_FROM_VERTICES >= presets.GAMG_FROM_VERTICES[min(ranks, 2)]
+    assert presets.by_size(at - 1, ranks, contact, newton) == "bjacobi_sgs"
+    assert presets.by_size(at, ranks, contact, newton) == "gamg"
+    # more ranks never move the switch to larger problems, collisions never to
+    # smaller, Newton-iterated steps (which share a set-up) never to larger
+    assert table[2] <= table[1]
+    assert presets.CONTACT_GAMG_FROM_VERTICES >= table[min(ranks, 2)]
+    assert presets.NEWTON_GAMG_FROM_VERTICES[min(ranks, 2)] <= \
+        presets.GAMG_FROM_VERTICES[min(ranks, 2)]
+
+
+def test_the_peer_square_gets_gamg_when_its_steps_iterate_newton():
+    # S1-41 (1,681 vertices, no collisions): one solve a step keeps block
+    # Jacobi, Newton-iterated steps share a GAMG set-up and take GAMG
+    n = 41 * 41
+    for ranks in (1, 2):
+        assert presets.choose({}, None, None, n, ranks).preset == "bjacobi_sgs"
+        assert presets.choose({}, None, None, n, ranks, newton=True).preset == "gamg"
+    # with collisions the contact passes' short solves keep block Jacobi
+    assert presets.choose({}, None, None, n, 2, contact=True, newton=True).preset == \
+        "bjacobi_sgs"
 
 
 def test_the_peer_tablecloth_keeps_block_jacobi_and_the_square_of_its_size_does_not():
@@ -57,6 +74,22 @@ def test_a_scene_without_solver_gets_the_size_preset(monkeypatch):
     try:
         assert _solver(sim) == ("gamg", "aij", True, presets.DEFAULT_RTOL)
         sim.step()
+    finally:
+        sim.destroy()
+
+
+@pytest.mark.parametrize("newton_iterations, preset", [(1, "bjacobi_sgs"), (3, "gamg")])
+def test_the_scene_s_newton_iterations_reach_the_choice(monkeypatch, newton_iterations, preset):
+    # the crossovers moved apart so that only the step's Newton iterations decide
+    monkeypatch.setattr(presets, "GAMG_FROM_VERTICES", {1: 10 ** 6, 2: 10 ** 6})
+    monkeypatch.setattr(presets, "NEWTON_GAMG_FROM_VERTICES", {1: 10, 2: 10})
+    raw = grid_scene(time={"end": 0.02, "step": 0.01, "integrator": "bdf2",
+                           "newton_iterations": newton_iterations})
+    del raw["solver"]
+    sim = make_sim(raw)
+    try:
+        assert sim.solver_choice.preset == preset
+        assert sim.step()["newton_iterations"] >= 1
     finally:
         sim.destroy()
 
