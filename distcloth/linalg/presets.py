@@ -67,11 +67,10 @@ PRECONDITIONERS = {
 # Steps that iterate Newton set GAMG up once a step and keep it for the
 # corrections (integrate/implicit.py), so its set-up is shared by two to
 # four solves and it pays from smaller problems: on the stiff hanging square
-# (BDF-2 10 ms, at most four Newton iterations), over whole 2 s runs, GAMG
-# took 0.99x block Jacobi's stepping time at 21² (441 vertices), 1.12x less
-# at 31² and 41², 1.5x less at 61² on two ranks; 1.12x less at 41², 1.29x at
-# 61² on one (5 ms with two iterations: 1.12x at 41², 1.25x at 61², two
-# ranks).
+# (BDF-2 10 ms, at most four Newton iterations), over whole 2 s runs, block
+# Jacobi's stepping time was 0.99x GAMG's at 21² (441 vertices), 1.12x at
+# 31² and 41², 1.5x at 61² on two ranks; 1.12x at 41², 1.29x at 61² on one
+# (5 ms with two iterations: 1.12x at 41², 1.25x at 61², two ranks).
 GAMG_FROM_VERTICES = {1: 10000, 2: 5000}
 NEWTON_GAMG_FROM_VERTICES = {1: 1600, 2: 900}
 CONTACT_GAMG_FROM_VERTICES = 10000
