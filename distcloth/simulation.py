@@ -138,7 +138,9 @@ class Simulation:
                 cfg.solver_options, ls.mat_type, ls.warm_start, n_vertices, comm.size,
                 contact=collides,
                 aimed=ls.step_error_fraction is not None,
-                newton=self.integrator.newton_iterations() > 1)
+                newton=self.integrator.newton_iterations() > 1,
+                # contact as a barrier only: no contact rows filtered out of the solves
+                barrier=self.contact.barrier is not None and not cfg.has("self_collision"))
             self.system = LinearSystem(lay, self.pattern, comm, self.solver_choice.mat_type,
                                        self.solver_choice.warm_start, ls.pc_rebuild_every)
         self.pipeline = self._build_pipeline()

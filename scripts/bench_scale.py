@@ -8,9 +8,11 @@ keep in step with it): the peers' S2 material (0.15 kg/m², membrane
 started ``--gap`` (5 mm) above the sphere's top instead of 0.1 m, so that the
 timed steps are the phase that matters: the cloth in contact with the
 sphere, sliding over it and folding, not free fall. The solver is given
-explicitly (the scene does not follow any default chosen by problem size):
-CG with GAMG on AIJ, the settings of distcloth/linalg/presets.py, tuned on
-the 100k hanging square (docs/benchmarks.md, "Solver settings tried");
+explicitly: CG with GAMG on AIJ, the preset that distcloth/linalg/presets.py
+chooses for the contact model at these sizes (SOR-smoothed GAMG with
+contact as constraints, Chebyshev-smoothed with contact as a barrier;
+docs/benchmarks.md, "Solver settings tried" and "GAMG's smoother with
+contact as a barrier"), ``--preconditioner`` for another preset,
 ``--smooths 0`` for plain aggregation.
 
 Per size it prints, from one process group of ``--ranks`` ranks:
@@ -56,9 +58,9 @@ SCENE = ROOT / "configs" / "tablecloth_sphere.yaml"
 SPHERE_TOP = 0.5          # the scene's sphere: centre z 0.25, radius 0.25
 
 
-def solver_settings(smooths: int = 1):
-    """CG + GAMG on AIJ, as the scene's solver: and linear_system: sections:
-    distcloth's tuned GAMG (linalg/presets.py) with ``smooths`` prolongator
+def solver_settings(smooths: int = 1, preset: str = "gamg"):
+    """CG + a preset of linalg/presets.py (GAMG on AIJ) as the scene's solver:
+    and linear_system: sections, with ``smooths`` prolongator
     smoothing steps (pc_gamg_agg_nsmooths; the preset's 1). 0, plain
     aggregation, needs a third less memory in the set-up and far fewer
     set-up flops, but at 317² in contact 2-3x the CG iterations
@@ -67,15 +69,22 @@ def solver_settings(smooths: int = 1):
     interpolation over the large aggregates of every coupling cost 1.8x a
     solve at 1001² (docs/benchmarks.md, "GAMG's aggregation threshold on
     the stiff membrane")."""
-    from distcloth.linalg.presets import PRECONDITIONERS
-    options, mat_type = PRECONDITIONERS["gamg"]
-    plain = {"pc_gamg_threshold": 0.02} if smooths == 0 else {}
-    return ({"ksp_type": "cg", **options, "pc_gamg_agg_nsmooths": smooths, **plain, "ksp_rtol": 1e-5},
-            {"mat_type": mat_type})
+    from distcloth.linalg.presets import CONTACT_RTOL, PRECONDITIONERS
+    options, mat_type = PRECONDITIONERS[preset]
+    if options.get("pc_type") == "gamg":
+        plain = {"pc_gamg_threshold": 0.02} if smooths == 0 else {}
+        options = {**options, "pc_gamg_agg_nsmooths": smooths, **plain}
+    return ({"ksp_type": "cg", **options, "ksp_rtol": CONTACT_RTOL}, {"mat_type": mat_type})
+
+
+def default_preset(n: int, ranks: int, contact: str) -> str:
+    """The preset a scene of N x N vertices without a solver: section gets."""
+    from distcloth.linalg.presets import by_size
+    return by_size(n * n, ranks, contact=True, barrier=contact == "barrier")
 
 
 def scene(n: int, gap: float, step: float, out: str, every: int, smooths: int = 1,
-          contact: str = "constraints") -> dict:
+          contact: str = "constraints", preset: str = "gamg") -> dict:
     """The tablecloth scene at N x N with the overrides above (a raw mapping)."""
     from distcloth.config.load import read_scene_file
     raw = read_scene_file(str(SCENE))
@@ -83,7 +92,7 @@ def scene(n: int, gap: float, step: float, out: str, every: int, smooths: int = 
     cloth["mesh"]["grid"]["resolution"] = [n, n]
     cloth["mesh"]["center"] = [0.0, 0.0, SPHERE_TOP + gap]
     cloth["material"]["stretch"] = 1000.0        # the peers' S2 membrane, N/m
-    solver, linear_system = solver_settings(smooths)
+    solver, linear_system = solver_settings(smooths, preset)
     raw["solver"] = solver
     raw["linear_system"] = linear_system
     raw["time"] = {**raw["time"], "step": step, "end": 10.0}
@@ -129,7 +138,8 @@ def worker(args):
             os.remove(out)
     comm.synchronize()
     cfg = config_from_dict(scene(args.n, args.gap, args.step, out, args.every, args.smooths,
-                                 args.contact), str(SCENE.parent), str(SCENE))
+                                 args.contact, args.preconditioner), str(SCENE.parent),
+                          str(SCENE))
     mem = {"start": memory()}
     t0 = time.perf_counter()
     model = build_model(cfg)
@@ -198,6 +208,7 @@ def worker(args):
     local = np.array([stages[k] / args.steps for k in names])
     mx = comm.max(local)
     res = {"n": args.n, "vertices": model.num_vertices, "ranks": comm.size,
+           "preconditioner": args.preconditioner,
            "setup_s": setup, "warmup_s": warm, "step_s": total / args.steps,
            "step_max_s": float(comm.max(np.array([max(walls)]))[0]),
            "stages_max": {k: float(v) for k, v in zip(names, mx)},
@@ -272,6 +283,10 @@ def main():
     ap.add_argument("--every", type=int, default=5, help="a frame every so many steps")
     ap.add_argument("--contact", choices=("constraints", "barrier"), default="constraints",
                     help="contact.model (docs/collisions.md)")
+    from distcloth.linalg.presets import PRECONDITIONERS
+    ap.add_argument("--preconditioner", choices=sorted(PRECONDITIONERS), default=None,
+                    help="a preset of distcloth/linalg/presets.py (default: the one a scene "
+                         "of this size and contact model gets)")
     args = ap.parse_args()
     if args.worker:
         worker(args)
@@ -282,7 +297,9 @@ def main():
                "--worker", "--n", str(n), "--steps", str(args.steps), "--warmup",
                str(args.warmup), "--gap", str(args.gap), "--step", str(args.step),
                "--every", str(args.every), "--smooths", str(args.smooths),
-               "--contact", args.contact] + ["--profile"] * args.profile + [f"--petsc={args.petsc}"]
+               "--contact", args.contact,
+               "--preconditioner", args.preconditioner or default_preset(n, args.ranks, args.contact)]\
+            + ["--profile"] * args.profile + [f"--petsc={args.petsc}"]
         t0 = time.perf_counter()
         os.makedirs("/tmp/scale", exist_ok=True)
         stdout, stderr, peak_total, killed = run_watched(cmd, args.max_gib * 2 ** 30,
@@ -313,7 +330,8 @@ def summary(res: dict) -> str:
     named = forces + st["assembly"] + st["solve"] + collisions + st["output"]
     lines = [f"{res['n']}x{res['n']} ({res['vertices']} vertices), {res['ranks']} ranks: "
              f"set-up {res['setup_s']:.1f} s, {res['step_s']:.2f} s per step (slowest "
-             f"{res['step_max_s']:.2f} s) to t = {res['t_end']:g} s",
+             f"{res['step_max_s']:.2f} s) to t = {res['t_end']:g} s, CG with "
+             f"{res['preconditioner']}",
              f"  split per step (slowest rank): forces {forces:.2f} s (membrane "
              f"{st['force:membrane']:.2f}, bending {st['force:bending']:.2f}), assembly "
              f"{st['assembly']:.2f}, solve {st['solve']:.2f}, collisions {collisions:.2f} "

@@ -10,6 +10,7 @@ import pytest
 from distcloth.config.load import config_from_dict, own_option_names
 from distcloth.model import STRUCTURAL, Model
 from distcloth.linalg.pattern import BlockPattern
+from distcloth.linalg.presets import PRECONDITIONERS
 from distcloth.physics.terms import SpringTerm
 from distcloth.scene import build_model
 
@@ -161,6 +162,7 @@ def test_hanging_square_at_rest(material):
 @pytest.mark.parametrize("solver", [
     {"mat_type": "aij", "pc_type": "gamg", "mg_levels_ksp_type": "richardson",
      "mg_levels_pc_type": "sor"},
+    {"mat_type": "aij", **PRECONDITIONERS["gamg_chebyshev"][0]},
     {"mat_type": "aij", "pc_type": "hypre"},
     {"mat_type": "baij", "pc_type": "jacobi", "pc_rebuild_every": 3, "warm_start": True},
     {"pc_type": "python", "pc_python_type": "distcloth.linalg.sgs32.SinglePrecisionSGS"},

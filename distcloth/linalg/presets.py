@@ -8,9 +8,13 @@ with one symmetric-SOR sweep per level and every coupling in its aggregation
 graph (threshold 0: on a stiff membrane a threshold of 0.02 drops enough
 couplings that GAMG coarsens by only 4 a level into dense coarse matrices,
 operator complexity 2.2 against 1.09, and a solve in contact at 317² costs
-30-40 % more), hypre BoomerAMG with HMIS coarsening and ext+i interpolation;
-both on AIJ (PETSc's GAMG cannot build its graph from BAIJ). ``sgs32`` is the reference preconditioner of the EG07
-tutorial, Part 1 §5.7, with a float32 matrix (distcloth/linalg/sgs32.py).
+30-40 % more); the same GAMG smoothed by Chebyshev on point-block Jacobi,
+which the barrier's Newton solves take as few CG iterations with as with
+SOR, for cheaper V-cycles (contact as constraints and the hanging square
+took 20-50 % more); hypre BoomerAMG with HMIS coarsening and ext+i
+interpolation; all on AIJ (PETSc's GAMG cannot build its graph from BAIJ).
+``sgs32`` is the reference preconditioner of the EG07 tutorial, Part 1
+§5.7, with a float32 matrix (distcloth/linalg/sgs32.py).
 """
 from __future__ import annotations
 
@@ -25,6 +29,17 @@ PRECONDITIONERS = {
     "gamg": ({"pc_type": "gamg", "pc_gamg_reuse_interpolation": "true", "pc_gamg_threshold": 0.0,
               "mg_levels_ksp_type": "richardson", "mg_levels_pc_type": "sor",
               "mg_levels_ksp_max_it": 1}, "aij"),
+    # GAMG smoothed by two Chebyshev iterations on 3x3 point-block Jacobi: a
+    # V-cycle of matrix products, which at 20k-100k vertices run 2-2.5x the
+    # flop rate of the SOR sweep (whose triangular solve is a chain of
+    # dependent rows), at the bounds' safety factor 1.5 on the largest
+    # eigenvalue of the Krylov estimate (1.1, PETSc's, and 1.2 gave indefinite
+    # V-cycles on the stiff hanging square); the estimate is made afresh at
+    # each set-up, as point-block Jacobi cannot reuse the aggregation's
+    "gamg_chebyshev": ({"pc_type": "gamg", "pc_gamg_reuse_interpolation": "true",
+                        "pc_gamg_threshold": 0.0, "mg_levels_ksp_type": "chebyshev",
+                        "mg_levels_pc_type": "pbjacobi", "mg_levels_ksp_max_it": 2,
+                        "mg_levels_ksp_chebyshev_esteig": "0,0.1,0,1.5"}, "aij"),
     "hypre": ({"pc_type": "hypre", "pc_hypre_type": "boomeramg",
                "pc_hypre_boomeramg_coarsen_type": "HMIS", "pc_hypre_boomeramg_interp_type": "ext+i",
                "pc_hypre_boomeramg_P_max": 4, "pc_hypre_boomeramg_strong_threshold": 0.7}, "aij"),
@@ -71,6 +86,12 @@ PRECONDITIONERS = {
 # Jacobi's stepping time was 0.99x GAMG's at 21² (441 vertices), 1.12x at
 # 31² and 41², 1.5x at 61² on two ranks; 1.12x at 41², 1.29x at 61² on one
 # (5 ms with two iterations: 1.12x at 41², 1.25x at 61², two ranks).
+# With contact as a barrier, GAMG is smoothed by Chebyshev (gamg_chebyshev):
+# on the tablecloth landing on the sphere (2 ranks) its V-cycle cost
+# 0.55-0.65 of SOR's and the barrier's Newton solves took as many of them,
+# 0.67x the step at 141², 0.90x at 201², 0.7-0.8x at 317² (0.82-0.92x over
+# the landing); with contact as constraints 1.5x the V-cycles and the same
+# time, on the hanging square 20-45 % more CG iterations and 10-25 % more time.
 GAMG_FROM_VERTICES = {1: 10000, 2: 5000}
 NEWTON_GAMG_FROM_VERTICES = {1: 1600, 2: 900}
 CONTACT_GAMG_FROM_VERTICES = 10000
@@ -91,19 +112,23 @@ class SolverChoice:
         return f"{self.preset}, chosen by problem size" if self.preset else "the scene's solver:"
 
 
-def by_size(n_vertices: int, ranks: int, contact: bool = False, newton: bool = False) -> str:
+def by_size(n_vertices: int, ranks: int, contact: bool = False, newton: bool = False,
+            barrier: bool = False) -> str:
     """The preconditioner (a PRECONDITIONERS name) for a cloth of this many
-    vertices on this many ranks, in a scene with or without collisions, whose
-    steps iterate Newton (more than one solve a step) or not."""
+    vertices on this many ranks, in a scene with or without collisions (with
+    contact as a ``barrier`` or not), whose steps iterate Newton (more than
+    one solve a step) or not."""
     at = (NEWTON_GAMG_FROM_VERTICES if newton else GAMG_FROM_VERTICES)[min(ranks, 2)]
     if contact:
         at = max(at, CONTACT_GAMG_FROM_VERTICES)
-    return "gamg" if n_vertices >= at else "bjacobi_sgs"
+    if n_vertices < at:
+        return "bjacobi_sgs"
+    return "gamg_chebyshev" if contact and barrier else "gamg"
 
 
 def choose(solver: dict, mat_type: str | None, warm_start: bool | None,
            n_vertices: int, ranks: int, contact: bool = False,
-           aimed: bool = False, newton: bool = False) -> SolverChoice:
+           aimed: bool = False, newton: bool = False, barrier: bool = False) -> SolverChoice:
     """The scene's own ``solver:`` options if it wrote any (``solver`` not
     empty; then BAIJ and no warm start unless ``linear_system`` says so),
     else the preset by size, with CONTACT_RTOL if the scene has collisions,
@@ -113,7 +138,8 @@ def choose(solver: dict, mat_type: str | None, warm_start: bool | None,
     block-Jacobi SGS (GAMG needs AIJ)."""
     if solver:
         return SolverChoice(dict(solver), mat_type or "baij", bool(warm_start))
-    name = by_size(n_vertices, ranks, contact, newton) if mat_type != "baij" else "bjacobi_sgs"
+    name = by_size(n_vertices, ranks, contact, newton, barrier) if mat_type != "baij" \
+        else "bjacobi_sgs"
     options, preset_mat = PRECONDITIONERS[name]
     rtol = CONTACT_RTOL if contact else DEFAULT_RTOL
     norm = {"ksp_norm_type": "unpreconditioned"} if aimed or not contact else {}
