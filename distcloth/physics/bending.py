@@ -160,15 +160,12 @@ def hinges(triangles) -> np.ndarray:
 
 
 def hinge_angles(x, hinge) -> np.ndarray:
-    """Signed dihedral angles (ne,) of the hinges at positions x (vectorised)."""
-    x = np.asarray(x, dtype=np.float64)
-    x0, x1, x2, x3 = (x[hinge[:, a]] for a in range(4))
-    e = x1 - x0
-    nA = np.cross(e, x2 - x0)
-    nB = np.cross(x3 - x0, e)
-    s = np.einsum("ij,ij->i", np.cross(nB, nA), e) / np.linalg.norm(e, axis=1)
-    c = np.einsum("ij,ij->i", nA, nB)
-    return np.arctan2(s, c)
+    """Signed dihedral angles (ne,) of the hinges at positions x."""
+    x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
+    hinge = np.ascontiguousarray(hinge, dtype=np.int64).reshape(-1, 4)
+    out = np.empty(hinge.shape[0])
+    _hinge_angles(x, hinge, out)
+    return out
 
 
 def _unwrapped(theta, near):
@@ -310,6 +307,31 @@ def hinge_angle_gradient(x, i0, i1, i2, i3, g):
         g[0, c] = -(1.0 - ta) * g[2, c] - (1.0 - tb) * g[3, c]
         g[1, c] = -ta * g[2, c] - tb * g[3, c]
     return theta
+
+
+@njit(cache=True)
+def _hinge_angles(x, hinge, out):
+    # the force kernel's angle, to the last bit (its gradient, written to a
+    # scratch, costs little beside numpy's temporaries)
+    g = np.empty((4, 3))
+    for h in range(hinge.shape[0]):
+        out[h] = hinge_angle_gradient(x, hinge[h, 0], hinge[h, 1], hinge[h, 2], hinge[h, 3], g)
+
+
+@njit(cache=True)
+def dihedral_energy(x, hinge, theta0, kb, weight, branch):
+    """sum_h weight_h kb_h (theta_h - theta0_h)^2, each angle taken within pi
+    of ``branch`` (as dihedral_forces) if it has one entry per hinge."""
+    energy = 0.0
+    follow = branch.shape[0] == hinge.shape[0]
+    g = np.empty((4, 3))
+    for h in range(hinge.shape[0]):
+        theta = hinge_angle_gradient(x, hinge[h, 0], hinge[h, 1], hinge[h, 2], hinge[h, 3], g)
+        if follow:
+            theta = angle_near(theta, branch[h])
+        d = theta - theta0[h]
+        energy += kb[h] * d * d * weight[h]
+    return energy
 
 
 @njit(cache=True)
@@ -805,8 +827,5 @@ class DihedralBendingTerm(_HingeTerm):
             add_gauss_newton_blocks(self.grad, self.coef, alpha, self.slots, data)
 
     def energy(self, x):
-        theta = hinge_angles(x, self.hinges)
-        if self.branch.shape == theta.shape:
-            theta = _unwrapped(theta, self.branch)
-        d = theta - self.theta0
-        return float(np.sum(self.kb * d * d * self.weight))
+        return float(dihedral_energy(np.ascontiguousarray(x, dtype=np.float64), self.hinges,
+                                     self.theta0, self.kb, self.weight, self.branch))
