@@ -33,9 +33,9 @@ PRECONDITIONERS = {
     # V-cycle of matrix products, which at 20k-100k vertices run 2-2.5x the
     # flop rate of the SOR sweep (whose triangular solve is a chain of
     # dependent rows), at the bounds' safety factor 1.5 on the largest
-    # eigenvalue of the Krylov estimate (1.1, PETSc's, and 1.2 gave indefinite
-    # V-cycles on the stiff hanging square); the estimate is made afresh at
-    # each set-up, as point-block Jacobi cannot reuse the aggregation's
+    # eigenvalue of the Krylov estimate (1.2 gave an indefinite V-cycle on the
+    # stiff hanging square; PETSc's 1.1 is lower still); the estimate is made
+    # afresh at each set-up, as point-block Jacobi cannot reuse the aggregation's
     "gamg_chebyshev": ({"pc_type": "gamg", "pc_gamg_reuse_interpolation": "true",
                         "pc_gamg_threshold": 0.0, "mg_levels_ksp_type": "chebyshev",
                         "mg_levels_pc_type": "pbjacobi", "mg_levels_ksp_max_it": 2,
@@ -90,8 +90,9 @@ PRECONDITIONERS = {
 # on the tablecloth landing on the sphere (2 ranks) its V-cycle cost
 # 0.55-0.65 of SOR's and the barrier's Newton solves took as many of them,
 # 0.67x the step at 141², 0.90x at 201², 0.7-0.8x at 317² (0.77-0.92x over
-# and after the landing), 0.73x at 1001²; with contact as constraints 1.5x the V-cycles and the same
-# time, on the hanging square 20-45 % more CG iterations and 10-25 % more time.
+# and after the landing), 0.73x at 1001²; with contact as constraints 1.5x
+# the V-cycles and the same time, on the hanging square 20-45 % more CG
+# iterations and 10-25 % more time.
 GAMG_FROM_VERTICES = {1: 10000, 2: 5000}
 NEWTON_GAMG_FROM_VERTICES = {1: 1600, 2: 900}
 CONTACT_GAMG_FROM_VERTICES = 10000
