@@ -89,7 +89,7 @@ PRECONDITIONERS = {
 # With contact as a barrier, GAMG is smoothed by Chebyshev (gamg_chebyshev):
 # on the tablecloth landing on the sphere (2 ranks) its V-cycle cost
 # 0.55-0.65 of SOR's and the barrier's Newton solves took as many of them,
-# 0.67x the step at 141², 0.90x at 201², 0.7-0.8x at 317² (0.77-0.92x over
+# 0.67x the step at 141², 0.90x at 201², 0.7-0.8x at 317² (0.77-0.96x over
 # and after the landing), 0.73x at 1001²; with contact as constraints 1.5x
 # the V-cycles and the same time, on the hanging square 20-45 % more CG
 # iterations and 10-25 % more time.
