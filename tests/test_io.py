@@ -24,6 +24,7 @@ from distcloth.io import (CollectiveError, ResultWriter, check_xdmf, read_collid
                           write_previews)
 from distcloth.io import h5writer
 from distcloth.parallel.comm import Comm
+from conftest import clean_env as mpi_env
 
 COMM = MPI.COMM_WORLD
 RANK, SIZE = COMM.rank, COMM.size
@@ -95,6 +96,16 @@ class Synthetic:
     def write_frame(self, w, k):
         w.write_frame(int(self.frame_step[k]), float(self.frame_time[k]), self.frames[k][self.owned])
 
+    def check_steps(self, r):
+        """Every per-step table of ``read_result``'s ``r`` is this run's."""
+        assert np.array_equal(r["diagnostics"]["step"], self.step)
+        assert np.array_equal(r["diagnostics"]["time"], self.time)
+        for k in DIAGS:
+            assert np.array_equal(r["diagnostics"][k], self.diag[k]), k
+        for k in STAGES:
+            assert np.array_equal(r["stage_time"][k], self.stage_time[k]), k
+            assert np.array_equal(r["stage_calls"][k], self.stage_calls[k]), k
+
     def write_run(self, w, frames=None):
         for k in range(self.frames.shape[0] if frames is None else frames):
             self.write_steps(w, k)
@@ -161,13 +172,7 @@ def test_round_trip_in_input_order(shared_dir, step_buffer):
         assert np.array_equal(r["triangles"], syn.triangles)
         assert np.array_equal(r["part"], syn.part)
         assert r["config"] == syn.config
-        assert np.array_equal(r["diagnostics"]["step"], syn.step)
-        assert np.array_equal(r["diagnostics"]["time"], syn.time)
-        for k in DIAGS:
-            assert np.array_equal(r["diagnostics"][k], syn.diag[k]), k
-        for k in STAGES:
-            assert np.array_equal(r["stage_time"][k], syn.stage_time[k]), k
-            assert np.array_equal(r["stage_calls"][k], syn.stage_calls[k]), k
+        syn.check_steps(r)
         a = r["attrs"]
         assert a["status"] == "completed" and a["error"] == "" and a["error_step"] == -1
         assert a["scene"] == "synthetic" and a["ranks"] == SIZE and a["ksp_rtol"] == 1e-8
@@ -181,6 +186,29 @@ def test_round_trip_in_input_order(shared_dir, step_buffer):
             assert f["mesh/triangles"].dtype == np.int64
             assert f["diagnostics/stage_calls/solve"].dtype == np.int64
             assert all(f[f"diagnostics/{k}"].maxshape == (None,) for k in DIAGS)
+
+    on_root(check)
+
+
+def test_step_tables_grow_ahead_and_are_cut_at_close(shared_dir, monkeypatch):
+    # tables grown 4 rows ahead, steps flushed 3 at a time and at every frame:
+    # eight growths, flushes that straddle them, 44 rows for 40 steps cut at close
+    monkeypatch.setattr(h5writer, "STEP_TABLE_GROWTH", 4)
+    syn = Synthetic(frames=5, steps_per_frame=8)
+    path = os.path.join(shared_dir, "grown.h5")
+    with syn.writer(path, step_buffer=3) as w:
+        syn.write_run(w)
+
+    def check():
+        r = read_result(path)
+        assert r["steps_written"] == 40
+        syn.check_steps(r)
+        with h5py.File(path, "r") as f:
+            tables = []
+            f["diagnostics"].visititems(lambda name, obj: tables.append(obj.shape)
+                                        if isinstance(obj, h5py.Dataset) else None)
+            # 2 + diagnostics + stage times and calls, all cut to the steps written
+            assert tables == [(40,)] * (2 + len(DIAGS) + 2 * len(STAGES))
 
     on_root(check)
 
@@ -319,6 +347,43 @@ def test_a_warning_makes_a_completed_run_completed_with_warnings(shared_dir):
     w = syn.writer(path, resume_step=4)
     assert w.warnings() == []
     assert w.close() == "completed"
+
+
+THREE_RANK_RESUME = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from mpi4py import MPI
+    sys.path.insert(0, %r)
+    from test_io import Synthetic
+    comm = MPI.COMM_WORLD
+    path = sys.argv[1]
+    for trial in range(4):          # the same path again: a file replaced, then resumed
+        syn = Synthetic()
+        w = syn.writer(path)
+        syn.write_run(w, frames=2)
+        w.close()
+        for step in (8, 4):
+            w = syn.writer(path, resume_step=step)
+            w.close()
+            if comm.rank == 0:
+                from distcloth.io import read_result
+                r = read_result(path)
+                assert np.array_equal(r["diagnostics"]["step"], np.arange(step + 1)), (trial, step)
+                assert np.array_equal(r["diagnostics"]["kinetic_energy"],
+                                      syn.diag["kinetic_energy"][:step + 1]), (trial, step)
+            comm.Barrier()
+""") % os.path.dirname(os.path.abspath(__file__))
+
+
+@pytest.mark.skipif(RANK != 0, reason="launches its own three ranks from rank 0")
+def test_resumed_file_reads_alike_on_three_ranks(tmp_path):
+    # a rank that cut the tables while another still read them made that one
+    # read the diagnostics of a resumed file as zeros past the first flush's
+    # rows (every run of this child failed so, before the writer waited)
+    proc = subprocess.run(["mpiexec", "--oversubscribe", "-n", "3", sys.executable, "-c",
+                           THREE_RANK_RESUME, str(tmp_path / "resumed.h5")],
+                          env=mpi_env(), capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr[-3000:]
 
 
 def test_collective_error_in_with_block_closes_failed(shared_dir):
@@ -575,6 +640,11 @@ def test_killed_run_leaves_frames_readable(tmp_path):
     r = read_result(path)
     assert r["attrs"]["status"] == "running"       # never closed
     assert r["frames_written"] == 2 and r["steps_written"] == 10
+    # the tables had grown ahead of the steps written; the reader cuts them
+    with h5py.File(path, "r") as f:
+        assert f["diagnostics/kinetic_energy"].shape[0] > 10
+    assert np.array_equal(r["diagnostics"]["kinetic_energy"], np.repeat([0.0, 1.0], 5))
+    assert np.array_equal(r["diagnostics"]["step"], np.arange(10))
     frames = np.random.default_rng(5)
     frames.random((1000, 3))
     frames.integers(0, 1000, size=(1997, 3))
