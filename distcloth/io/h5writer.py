@@ -698,7 +698,7 @@ class ResultWriter:
     def _make_view(self, ds: h5py.Dataset, k: int) -> None:
         """Collective: the virtual dataset that is row k of ``ds`` (xdmf.frame_view)."""
         # HDF5's own calls: h5py's VirtualLayout spent most of a view's time in
-        # Python (0.85 ms against 0.33 a view at 41² on two ranks)
+        # Python (0.7-0.85 ms against 0.33 a view at 41² on two ranks)
         source = h5s.create_simple(ds.shape)
         source.select_hyperslab((k,) + (0,) * (ds.ndim - 1), (1,) + ds.shape[1:])
         view = h5s.create_simple(ds.shape[1:])
