@@ -602,18 +602,24 @@ class ResultWriter:
 
     # ------------------------------------------------------------ low level
 
-    def _write(self, dset: h5py.Dataset, mspace, fspace, data: np.ndarray, mtype=None) -> None:
-        if self._dxpl is None:
+    def _write(self, dset: h5py.Dataset, mspace, fspace, data: np.ndarray, mtype=None,
+               dxpl=None) -> None:
+        dxpl = self._dxpl if dxpl is None else dxpl
+        if dxpl is None:
             dset.id.write(mspace, fspace, data, mtype=mtype)
         else:
-            dset.id.write(mspace, fspace, data, mtype=mtype, dxpl=self._dxpl)
+            dset.id.write(mspace, fspace, data, mtype=mtype, dxpl=dxpl)
 
-    def _write_root(self, dset: h5py.Dataset, data: np.ndarray, start: int = 0, mtype=None) -> None:
-        """Collective write of ``data`` into dset[start:start+len] by rank 0 only.
-
-        The other ranks join with empty selections: a collective transfer
-        needs every rank, and one writer avoids n-fold redundant I/O.
+    def _write_root(self, dset: h5py.Dataset, data: np.ndarray, start: int = 0, mtype=None,
+                    alone: bool = False) -> None:
+        """Write of ``data`` into dset[start:start+len] by rank 0 only:
+        collective, the other ranks joining with empty selections (a
+        collective transfer needs every rank, and one writer avoids n-fold
+        redundant I/O), or ``alone`` with independent MPI-IO, the other ranks
+        doing nothing (raw data into space already allocated).
         """
+        if alone and self.rank != 0:
+            return
         data = np.require(data, requirements="C")   # (ascontiguousarray makes 0-d arrays 1-d)
         fspace = dset.id.get_space()
         mspace = h5s.create(h5s.SCALAR) if data.ndim == 0 else h5s.create_simple(data.shape)
@@ -623,7 +629,8 @@ class ResultWriter:
         elif data.ndim > 0:
             count = data.shape
             fspace.select_hyperslab((start,) + (0,) * (data.ndim - 1), count)
-        self._write(dset, mspace, fspace, data, mtype=mtype)
+        self._write(dset, mspace, fspace, data, mtype=mtype,
+                    dxpl=self._dxpl_own if alone else None)
 
     def _size_step_tables(self, rows: int) -> None:
         """Collective: every per-step table resized to ``rows``, once rank 0's
@@ -651,15 +658,8 @@ class ResultWriter:
         start = self.steps_written
         if start + m > self._step_rows:
             self._size_step_tables(start + m + STEP_TABLE_GROWTH)
-        if self.rank == 0:
-            for ds, buf in self._step_tables:
-                fspace = ds.id.get_space()
-                fspace.select_hyperslab((start,), (m,))
-                data = np.ascontiguousarray(buf[:m])
-                if self._dxpl_own is None:
-                    ds.id.write(h5s.create_simple((m,)), fspace, data)
-                else:
-                    ds.id.write(h5s.create_simple((m,)), fspace, data, dxpl=self._dxpl_own)
+        for ds, buf in self._step_tables:
+            self._write_root(ds, buf[:m], start=start, alone=True)
         self.steps_written += m
         self._file.attrs["steps_written"] = np.int64(self.steps_written)
         self._n_buffered = 0
