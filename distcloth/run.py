@@ -251,12 +251,21 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
         if legs is not None:
             log(comm, f"collider {c.name}: legs turned apart up to {legs:.1f} degrees each to "
                       f"keep the lower legs off each other")
-    writer = open_writer(sim, cfg, comm, path, sim.diagnostic_names(),
-                         {"steps": n_steps, "output_every_steps": every,
-                          "checkpoint": os.path.basename(checkpoint_path(path)), **image,
-                          **grip_attrs(sim)},
-                         garment_arrays(sim.model),
-                         resume_step=None if restart is None else sim.state.step)
+    try:
+        writer = open_writer(sim, cfg, comm, path, sim.diagnostic_names(),
+                             {"steps": n_steps, "output_every_steps": every,
+                              "checkpoint": os.path.basename(checkpoint_path(path)), **image,
+                              **grip_attrs(sim)},
+                             garment_arrays(sim.model),
+                             resume_step=None if restart is None else sim.state.step)
+    except ValueError as exc:
+        if restart is None:
+            raise
+        # the writer refused the result on every rank alike, before changing it
+        sim.destroy()
+        why = str(exc).removeprefix(f"{restart.result} ")
+        return _agree_config(comm, ConfigError("--resume", restart.result,
+                                               f"a result this checkpoint belongs to (it {why})"))
     if restart is None:
         log(comm, f"writing {os.path.abspath(path)}: {n_steps} steps of {h:g} s, a frame every {every}")
         sim.pipeline.run("output", writer)

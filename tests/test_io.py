@@ -349,6 +349,45 @@ def test_a_warning_makes_a_completed_run_completed_with_warnings(shared_dir):
     assert w.close() == "completed"
 
 
+def test_a_refused_resume_leaves_the_file_as_it_was(shared_dir, monkeypatch):
+    """A result the resumed run cannot go on in is refused on every rank alike,
+    with the file's frames and rows untouched: the checks run before any cut
+    and are agreed, so a rank that finds a problem the others do not (here
+    made to, on the last rank) stops them all instead of leaving them cutting."""
+    syn = Synthetic()
+    path = os.path.join(shared_dir, "refused.h5")
+    w = syn.writer(path)
+    syn.write_run(w, frames=2)
+    w.close()
+
+    def unchanged():
+        r = read_result(path)
+        assert r["attrs"]["status"] == "completed" and r["positions"].shape[0] == 2
+        assert np.array_equal(r["diagnostics"]["step"], syn.step[:10])
+        assert np.array_equal(r["diagnostics"]["kinetic_energy"], syn.diag["kinetic_energy"][:10])
+        assert np.array_equal(r["positions"][1], syn.frames[1])
+
+    with pytest.raises(ValueError, match="does not belong to this checkpoint"):
+        syn.writer(path, resume_step=15)          # its rows end at step 9
+    on_root(unchanged)
+    other = Synthetic(n=900)
+    with pytest.raises(ValueError, match="has 1000 vertices, the resumed run 900"):
+        other.writer(path, resume_step=4)
+    on_root(unchanged)
+    with pytest.raises(ValueError, match=r"has no diagnostics \['strain'\]"):
+        ResultWriter(path, Comm(COMM), rest_positions=syn.rest, triangles=syn.triangles,
+                     owned_input=syn.owned, part=syn.part, config_text=syn.config,
+                     attrs=syn.attrs, stage_names=STAGES, diagnostic_names=DIAGS + ["strain"],
+                     resume_step=4)
+    on_root(unchanged)
+    if RANK == SIZE - 1:
+        monkeypatch.setattr(h5writer, "_resume_problem",
+                            lambda *a, **k: ("cannot be read (made to fail here)", 0, 0))
+    with pytest.raises(ValueError, match=r"refused\.h5 cannot be read \(made to fail here\)"):
+        syn.writer(path, resume_step=4)
+    on_root(unchanged)
+
+
 THREE_RANK_RESUME = textwrap.dedent("""
     import sys
     import numpy as np

@@ -163,6 +163,32 @@ def test_resume_refuses_another_scene_and_extends_time_end(work):
     same_run(read_result(out), work["ref"])
 
 
+def test_resume_refuses_a_result_the_checkpoint_does_not_belong_to(work):
+    """A result file replaced beside its checkpoint (here by another run's, of
+    another resolution) is refused before anything in it changes: exit 2 and
+    one line, the replaced file as it was."""
+    d = work["dir"]
+    out, other = d / "replaced" / "out.h5", d / "other" / "out.h5"
+    r = cli(d, "run", "scene.yaml", "--output", out, "--set", "time.end=0.15")
+    assert r.returncode == 0, r.stderr
+    r = cli(d, "run", "scene.yaml", "--output", other, "--set", "time.end=0.1",
+            "--set", "cloth.0.mesh.grid.resolution=[7,7]")
+    assert r.returncode == 0, r.stderr
+    shutil.copyfile(other, out)
+    before = read_result(out)
+    r = cli(d, "run", "scene.yaml", "--resume", checkpoint_path(str(out)))
+    assert r.returncode == 2, r.stderr
+    no_traceback(r)
+    first = r.stderr.strip().splitlines()[0]     # then mpiexec's note of the exit status
+    assert first.startswith("distcloth: config error: --resume:"), r.stderr
+    assert "(it has 49 vertices, the resumed run 81)" in first, r.stderr
+    assert r.stderr.count("config error") == 1, r.stderr
+    after = read_result(out)
+    assert after["attrs"]["steps_written"] == before["attrs"]["steps_written"]
+    assert np.array_equal(after["positions"], before["positions"])
+    assert after["attrs"]["status"] == "completed"
+
+
 def test_sigint_to_mpiexec_stops_cleanly(work):
     """Ctrl-C at a terminal: mpiexec relays it to every rank as SIGTERM."""
     d = work["dir"]

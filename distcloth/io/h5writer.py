@@ -188,6 +188,40 @@ class _SerialComm:
     def synchronize():
         pass
 
+    @staticmethod
+    def agree(error):
+        return None if error is None else (0, error)
+
+
+def _resume_problem(f, step: int, n_vertices: int, diagnostic_names, field_names,
+                    colliders) -> tuple[str | None, int, int]:
+    """(what keeps the open result ``f`` from going on after ``step``, or None;
+    the frames and step rows to keep).  Read only: a file refused is left as
+    it was.  ``colliders``: (name, group) of the resumed run's bodies."""
+    if f.attrs.get("format") != FORMAT_NAME or "frames/positions" not in f:
+        return "is not a distcloth result file", 0, 0
+    if f["frames/positions"].shape[1] != n_vertices:
+        return (f"has {f['frames/positions'].shape[1]} vertices, the resumed run "
+                f"{n_vertices}"), 0, 0
+    missing = [k for k in ("step", *diagnostic_names) if f"diagnostics/{k}" not in f]
+    if missing:
+        return f"has no diagnostics {missing}", 0, 0
+    missing = [k for k in field_names if f"frames/{k}" not in f]
+    if missing:
+        return f"has no per-frame fields {missing} (an older format)", 0, 0
+    missing = [name for name, group in colliders if f"colliders/{group}" not in f]
+    if missing:
+        return f"has no collider {missing[0]!r}", 0, 0
+    nf = min(int(f.attrs.get("frames_written", 0)), f["frames/step"].shape[0])
+    ns = min(int(f.attrs.get("steps_written", 0)), f["diagnostics/step"].shape[0])
+    keep_f = int(np.searchsorted(f["frames/step"][:nf], step, side="right"))
+    steps = f["diagnostics/step"][:ns]
+    keep_s = int(np.searchsorted(steps, step, side="right"))
+    if keep_s and steps[keep_s - 1] != step:
+        return (f"lacks the diagnostics of steps {int(steps[keep_s - 1]) + 1} to {step}: it "
+                f"does not belong to this checkpoint"), keep_f, keep_s
+    return None, keep_f, keep_s
+
 
 def _text(value) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
@@ -514,22 +548,20 @@ class ResultWriter:
         diagnostics rows are cut off (collective: every rank reads the same
         file and resizes alike)."""
         f = self._file
-        if f.attrs.get("format") != FORMAT_NAME or "frames/positions" not in f:
-            raise ValueError(f"{self.path} is not a distcloth result file")
-        if f["frames/positions"].shape[1] != self.n_vertices:
-            raise ValueError(f"{self.path} has {f['frames/positions'].shape[1]} vertices, the "
-                             f"resumed run {self.n_vertices}")
-        missing = [k for k in self.diagnostic_names if f"diagnostics/{k}" not in f]
-        if missing:
-            raise ValueError(f"{self.path} has no diagnostics {missing}")
-        nf = min(int(f.attrs.get("frames_written", 0)), f["frames/step"].shape[0])
-        ns = min(int(f.attrs.get("steps_written", 0)), f["diagnostics/step"].shape[0])
-        keep_f = int(np.searchsorted(f["frames/step"][:nf], step, side="right"))
-        steps = f["diagnostics/step"][:ns]
-        keep_s = int(np.searchsorted(steps, step, side="right"))
-        if keep_s and steps[keep_s - 1] != step:
-            raise ValueError(f"{self.path} lacks the diagnostics of steps {int(steps[keep_s - 1]) + 1}"
-                             f" to {step}: it does not belong to this checkpoint")
+        groups = _group_names([b[0] for b in bodies])
+        try:
+            problem, keep_f, keep_s = _resume_problem(
+                f, step, self.n_vertices, self.diagnostic_names,
+                [fld.name for fld in self.fields],
+                [(b[0], group) for b, group in zip(bodies, groups)])
+        except (OSError, KeyError, ValueError) as exc:
+            problem, keep_f, keep_s = f"cannot be read ({exc})", 0, 0
+        # every rank reads the same file, but one that failed to must not leave
+        # the others cutting it: agreed before anything is changed
+        agreed = self._comm.agree(None if problem is None else f"{self.path} {problem}")
+        if agreed is not None:
+            f.close()       # collective: every rank refuses alike
+            raise ValueError(agreed[1])
 
         def cut(name, obj):
             if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None:
@@ -541,9 +573,6 @@ class ResultWriter:
         # file read back as zeros past the first flush's rows)
         self._comm.synchronize()
         f.visititems(cut)
-        missing = [fld.name for fld in self.fields if f"frames/{fld.name}" not in f]
-        if missing:
-            raise ValueError(f"{self.path} has no per-frame fields {missing} (an older format)")
         self._field_ds = {fld.name: f[f"frames/{fld.name}"] for fld in self.fields}
         # the per-frame views of the frames cut off go too: they are made again
         views = [ds.name for ds in [f["frames/positions"], *self._field_ds.values()]]
@@ -580,8 +609,6 @@ class ResultWriter:
         self._moving, self._xdmf_bodies = [], []
         for c, (name, shape, moving, nv, m), group in zip(
                 colliders, bodies, _group_names([b[0] for b in bodies])):
-            if f"colliders/{group}" not in f:
-                raise ValueError(f"{self.path} has no collider {name!r}")
             if moving:
                 self._moving.append((c, f[f"colliders/{group}/positions"]))
             self._xdmf_bodies.append(XdmfBody(name, f"/colliders/{group}", nv, m, moving))
