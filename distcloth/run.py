@@ -33,7 +33,7 @@ from .interrupt import Interrupts, signal_name
 from .checkpointing import Checkpoints, open_resume
 from .io.checkpoint import checkpoint_path
 from .io.console import Progress, log
-from .io.h5writer import ResultWriter
+from .io.h5writer import ResultWriter, ResumeRefused
 from .io.liveness import identity
 from .restart import restore_solver, restore_state
 from .scene import build_model
@@ -258,10 +258,8 @@ def run(cfg, comm, *, output=None, resume=None, force=False, cmdline_options=Non
                               **grip_attrs(sim)},
                              garment_arrays(sim.model),
                              resume_step=None if restart is None else sim.state.step)
-    except ValueError as exc:
-        if restart is None:
-            raise
-        # the writer refused the result on every rank alike, before changing it
+    except ResumeRefused as exc:
+        # on every rank alike, before anything in the file changed
         sim.destroy()
         why = str(exc).removeprefix(f"{restart.result} ")
         return _agree_config(comm, ConfigError("--resume", restart.result,

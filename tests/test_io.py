@@ -367,14 +367,14 @@ def test_a_refused_resume_leaves_the_file_as_it_was(shared_dir, monkeypatch):
         assert np.array_equal(r["diagnostics"]["kinetic_energy"], syn.diag["kinetic_energy"][:10])
         assert np.array_equal(r["positions"][1], syn.frames[1])
 
-    with pytest.raises(ValueError, match="does not belong to this checkpoint"):
+    with pytest.raises(h5writer.ResumeRefused, match="does not belong to this checkpoint"):
         syn.writer(path, resume_step=15)          # its rows end at step 9
     on_root(unchanged)
     other = Synthetic(n=900)
-    with pytest.raises(ValueError, match="has 1000 vertices, the resumed run 900"):
+    with pytest.raises(h5writer.ResumeRefused, match="has 1000 vertices, the resumed run 900"):
         other.writer(path, resume_step=4)
     on_root(unchanged)
-    with pytest.raises(ValueError, match=r"has no diagnostics \['strain'\]"):
+    with pytest.raises(h5writer.ResumeRefused, match=r"has no diagnostics \['strain'\]"):
         ResultWriter(path, Comm(COMM), rest_positions=syn.rest, triangles=syn.triangles,
                      owned_input=syn.owned, part=syn.part, config_text=syn.config,
                      attrs=syn.attrs, stage_names=STAGES, diagnostic_names=DIAGS + ["strain"],
@@ -383,7 +383,8 @@ def test_a_refused_resume_leaves_the_file_as_it_was(shared_dir, monkeypatch):
     if RANK == SIZE - 1:
         monkeypatch.setattr(h5writer, "_resume_problem",
                             lambda *a, **k: ("cannot be read (made to fail here)", 0, 0))
-    with pytest.raises(ValueError, match=r"refused\.h5 cannot be read \(made to fail here\)"):
+    with pytest.raises(h5writer.ResumeRefused,
+                       match=r"refused\.h5 cannot be read \(made to fail here\)"):
         syn.writer(path, resume_step=4)
     on_root(unchanged)
 

@@ -5,10 +5,10 @@ for the protocol); it takes the communicator wrapper of
 ``distcloth/parallel/comm.py`` from the caller and never imports mpi4py itself.
 """
 from distcloth.io.h5read import read_attrs, read_colliders, read_result
-from distcloth.io.h5writer import CollectiveError, ResultWriter
+from distcloth.io.h5writer import CollectiveError, ResultWriter, ResumeRefused
 from distcloth.io.xdmf import XdmfAttribute, XdmfBody, XdmfSeries, check_xdmf, write_xdmf
 
-__all__ = ["ResultWriter", "CollectiveError", "read_result", "read_attrs", "read_colliders",
+__all__ = ["ResultWriter", "CollectiveError", "ResumeRefused", "read_result", "read_attrs", "read_colliders",
            "write_xdmf", "check_xdmf", "XdmfAttribute", "XdmfBody", "XdmfSeries",
            "write_previews"]
 

@@ -174,6 +174,12 @@ class CollectiveError(RuntimeError):
         self.step = int(step)
 
 
+class ResumeRefused(ValueError):
+    """The result file a run was to go on in does not fit it (another run's
+    file, its rows short of the resume step): raised on every rank alike,
+    before anything in the file changed."""
+
+
 class _SerialComm:
     """Stand-in for the communicator wrapper of a serial run (comm=None)."""
     rank = 0
@@ -561,7 +567,7 @@ class ResultWriter:
         agreed = self._comm.agree(None if problem is None else f"{self.path} {problem}")
         if agreed is not None:
             f.close()       # collective: every rank refuses alike
-            raise ValueError(agreed[1])
+            raise ResumeRefused(agreed[1])
 
         def cut(name, obj):
             if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None:
@@ -607,8 +613,7 @@ class ResultWriter:
         f.attrs["steps_written"] = np.int64(keep_s)
         self._step_tables_open(step_buffer, create=False)
         self._moving, self._xdmf_bodies = [], []
-        for c, (name, shape, moving, nv, m), group in zip(
-                colliders, bodies, _group_names([b[0] for b in bodies])):
+        for c, (name, shape, moving, nv, m), group in zip(colliders, bodies, groups):
             if moving:
                 self._moving.append((c, f[f"colliders/{group}/positions"]))
             self._xdmf_bodies.append(XdmfBody(name, f"/colliders/{group}", nv, m, moving))
