@@ -81,10 +81,11 @@ class Synthetic:
         self.attrs = {"scene": "synthetic", "ranks": SIZE, "integrator": "backward_euler",
                       "ksp_rtol": 1e-8, "verbose": False, "resolution": [40, 25]}
 
-    def writer(self, path, comm=COMM, **kw):
+    def writer(self, path, comm=COMM, diagnostic_names=DIAGS, **kw):
         return ResultWriter(path, Comm(comm), rest_positions=self.rest, triangles=self.triangles,
                             owned_input=self.owned, part=self.part, config_text=self.config,
-                            attrs=self.attrs, stage_names=STAGES, diagnostic_names=DIAGS, **kw)
+                            attrs=self.attrs, stage_names=STAGES,
+                            diagnostic_names=diagnostic_names, **kw)
 
     def write_steps(self, w, frame):
         for s in range(frame * self.steps_per_frame, (frame + 1) * self.steps_per_frame):
@@ -375,10 +376,7 @@ def test_a_refused_resume_leaves_the_file_as_it_was(shared_dir, monkeypatch):
         other.writer(path, resume_step=4)
     on_root(unchanged)
     with pytest.raises(h5writer.ResumeRefused, match=r"has no diagnostics \['strain'\]"):
-        ResultWriter(path, Comm(COMM), rest_positions=syn.rest, triangles=syn.triangles,
-                     owned_input=syn.owned, part=syn.part, config_text=syn.config,
-                     attrs=syn.attrs, stage_names=STAGES, diagnostic_names=DIAGS + ["strain"],
-                     resume_step=4)
+        syn.writer(path, diagnostic_names=DIAGS + ["strain"], resume_step=4)
     on_root(unchanged)
     if RANK == SIZE - 1:
         monkeypatch.setattr(h5writer, "_resume_problem",
