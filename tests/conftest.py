@@ -41,6 +41,22 @@ def pytest_collection_modifyitems(config, items):
                 item.add_marker(skip)
 
 
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_teardown(item):
+    """After a rank-0-only test the other ranks wait for rank 0 asleep: in the
+    next test's first collective they would spin, taking a core from the
+    test's own mpiexec job."""
+    if "rank0_only" not in item.keywords:
+        return
+    import time
+    from mpi4py import MPI
+    if MPI.COMM_WORLD.Get_size() == 1:
+        return
+    request = MPI.COMM_WORLD.Ibarrier()
+    while not request.Test():
+        time.sleep(0.005)
+
+
 @pytest.fixture(scope="session")
 def comm():
     from mpi4py import MPI
@@ -58,6 +74,13 @@ def clean_env(**extra) -> dict:
            if not k.startswith(("OMPI_", "PMIX_", "PRTE_", "HYDRA_")) and k != "H5PY_ALWAYS_USE_MPI"}
     env.update({"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
                 "OMPI_MCA_mpi_yield_when_idle": "1", "OMPI_MCA_rmaps_base_oversubscribe": "1",
+                # after a rank's non-zero exit mpiexec signals the job's other ranks and
+                # waits this long before it kills them and exits itself: by default 1 s,
+                # 1-2 s added to every child job that ends in an error, most of a
+                # bad-input case's time.  Those ranks end on their own (the error is
+                # agreed) and have written and printed all they will by then.  The test
+                # of the one-second grace mpiexec gives a relayed SIGINT sets it back.
+                "OMPI_MCA_odls_base_sigkill_timeout": "0",
                 "PYTHONPATH": str(ROOT)})
     env.update(extra)
     return env

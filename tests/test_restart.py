@@ -196,7 +196,9 @@ def test_sigint_to_mpiexec_stops_cleanly(work):
     cmd = ["mpiexec", "--oversubscribe", "-n", "2", sys.executable, "-m", "distcloth", "run",
            "scene.yaml", "--output", str(out), "--set", "time.end=20", "--set",
            "output.checkpoint.every_steps=5", "--quiet"]
-    p = subprocess.Popen(cmd, env=clean_env(), cwd=d, stderr=subprocess.PIPE, text=True)
+    # Open MPI's default: SIGKILL one second after the relayed SIGTERM (docs/restart.md)
+    p = subprocess.Popen(cmd, env=clean_env(OMPI_MCA_odls_base_sigkill_timeout="1"), cwd=d,
+                         stderr=subprocess.PIPE, text=True)
     ckpt = checkpoint_path(str(out))
     t0 = time.monotonic()
     while not os.path.exists(ckpt) and p.poll() is None and time.monotonic() - t0 < 60:
