@@ -13,6 +13,7 @@ import re
 import subprocess
 import sys
 import textwrap
+import time
 import xml.etree.ElementTree as ET
 
 import h5py
@@ -498,6 +499,44 @@ def test_xdmf_rewritten_each_frame_and_valid(shared_dir):
             assert view.is_virtual and view.shape == (syn.n, 3)
             assert np.array_equal(view[...], f["frames/positions"][2])
         assert not [p for p in os.listdir(shared_dir) if p.endswith(".tmp")]
+
+    on_root(check)
+
+
+def test_a_long_series_sidecar_is_rewritten_when_due_and_whole_at_close(shared_dir,
+                                                                         monkeypatch):
+    """Past XDMF_EVERY_FRAME_BELOW frames the sidecar is rewritten after a
+    frame only once XDMF_TIME_RATIO times its last rewrite's time has passed:
+    a rewrite made to take 20 ms allows the next 0.4 s later, so of 16 frames
+    written back to back (a few ms each) at most a few rewrite it; closing the
+    file lists every frame."""
+    from distcloth.io import h5writer
+    from distcloth.io.xdmf import XdmfSeries
+    below = h5writer.XDMF_EVERY_FRAME_BELOW
+    rewrites = []
+    plain = XdmfSeries.write
+
+    def slow(series, path):
+        plain(series, path)
+        time.sleep(0.02)
+        rewrites.append(len(series))
+
+    monkeypatch.setattr(XdmfSeries, "write", slow)
+    syn = Synthetic(n=60, frames=below + 16, steps_per_frame=1)
+    path = os.path.join(shared_dir, "long.h5")
+    w = syn.writer(path)
+    syn.write_run(w)
+    after_frames = list(rewrites)
+    w.close()
+
+    def check():
+        # every frame up to the limit, then few: without the rule all 16
+        assert after_frames[:below] == list(range(1, below + 1)), after_frames
+        assert len(after_frames) - below <= 4, after_frames
+        assert rewrites[-1] == below + 16
+        assert len(ET.parse(w.xdmf_path).getroot().findall(
+            ".//Grid[@GridType='Uniform']")) == below + 16
+        assert check_xdmf(w.xdmf_path) == []
 
     on_root(check)
 

@@ -111,9 +111,9 @@ def _text(grid) -> str:
 class XdmfSeries:
     """The sidecar of a growing result: a temporal collection per collider,
     then the cloth's (see the module docstring).  ``append`` adds a frame,
-    ``write`` writes the file; each frame is turned into XML once, so
-    rewriting the sidecar after every frame costs a copy of its text, not a
-    new serialisation of every frame."""
+    ``write`` writes the file; each frame is turned into XML once, so a
+    rewrite costs a copy of its text, not a new serialisation of every
+    frame (how often the result writer rewrites it: h5writer.py)."""
 
     def __init__(self, h5_filename: str, n_vertices: int, n_triangles: int,
                  extra_attributes: Sequence[XdmfAttribute] = (), bodies: Sequence[XdmfBody] = ()):
