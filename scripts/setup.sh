@@ -32,8 +32,8 @@ fi
 # Byte code written here, once per changed module: where PYTHONDONTWRITEBYTECODE
 # is set (containers often set it) Python still reads it but never writes it, and
 # every process, every rank, would compile the package's modules again (0.3 s of
-# a start).
-"$venv/bin/python" -m compileall -q "$here/distcloth" >/dev/null
+# a start).  Only a speed-up: a tree it cannot write to is no reason to stop.
+"$venv/bin/python" -m compileall -q "$here/distcloth" >/dev/null || true
 
 # numba compiles a kernel on its first call and caches it beside its source
 # (cache=True): a tiny run of two scenes here (the README's hammock, and a
