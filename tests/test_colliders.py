@@ -232,6 +232,31 @@ def test_analytic_collider_moving_box():
     np.testing.assert_allclose(vel, fd, atol=1e-7)
 
 
+@pytest.mark.parametrize("when", [-0.5, 2.0, 3.5])
+def test_a_body_at_rest_answers_as_the_general_transform_does(when):
+    """A static body skips the transform and a held one the velocity: the
+    same answers as the general path (world = body frame; zero velocity)."""
+    rng = np.random.default_rng(9)
+    y = rng.uniform(-1.0, 1.0, size=(400, 3))
+    y[0] = [0.1, -0.2, 0.3]                        # a sphere's centre: the fallback normal
+    sphere = Sphere((0.1, -0.2, 0.3), 0.4)
+    phi, n, vel = AnalyticCollider(sphere).query(y, 1.0)
+    phi_body, n_body = sphere.signed_distance(y)
+    np.testing.assert_array_equal(phi, phi_body)
+    np.testing.assert_array_equal(n, n_body)
+    assert np.array_equal(n[0], [0.0, 0.0, 1.0]) and not vel.any()
+    motion, *_ = keyed_motion()
+    assert not motion.moving(when) and motion.moving(0.8)
+    col = AnalyticCollider(sphere, motion)
+    phi, n, vel = col.query(y, when)
+    R, p = motion.transform(when)
+    phi_body, n_body = sphere.signed_distance((y - p) @ R)
+    np.testing.assert_allclose(phi, phi_body, atol=1e-14)
+    np.testing.assert_allclose(n, n_body @ R.T, atol=1e-14)
+    assert not vel.any()
+    np.testing.assert_array_equal(motion.point_velocity(y, when), 0.0)
+
+
 # ---------------------------------------------------------------- mesh colliders
 
 def small_mesh():

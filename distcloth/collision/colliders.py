@@ -140,6 +140,10 @@ class RigidMotion:
         p = (1.0 - s) * self.translations[i] + s * self.translations[i + 1]
         return R, p
 
+    def moving(self, t: float) -> bool:
+        """Whether the body moves at t (inside a key interval)."""
+        return not self.is_identity and _locate(self.times, t)[2]
+
     def velocity(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(v_p, ω): velocity of the reference point and world angular velocity."""
         if self.is_identity:
@@ -173,8 +177,10 @@ class RigidMotion:
 
 def _unit(v: np.ndarray, fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors and norms; zero vectors get ``fallback`` (unit, (3,) or (n, 3))."""
-    norm = np.linalg.norm(v, axis=-1)
+    norm = np.sqrt(np.einsum("ni,ni->n", v, v))
     zero = norm < 1e-300
+    if not zero.any():
+        return v / norm[:, None], norm
     out = v / np.where(zero, 1.0, norm)[:, None]
     out[zero] = np.broadcast_to(fallback, v.shape)[zero]
     return out, norm
@@ -295,14 +301,20 @@ class AnalyticCollider:
             raise ValueError("AnalyticCollider: friction and thickness must be >= 0")
 
     def signed_distance(self, points, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        R, p = self.motion.transform(t)
         y = _points(points)
+        if self.motion.is_identity:
+            # body and world frames agree: no transform (a static body is
+            # queried dozens of times a step by the barrier's Newton)
+            return self.shape.signed_distance(y)
+        R, p = self.motion.transform(t)
         phi, normal_body = self.shape.signed_distance((y - p) @ R)
         return phi, normal_body @ R.T
 
     def query(self, points, t: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         y = _points(points)
         phi, normal = self.signed_distance(y, t)
+        if not self.motion.moving(t):
+            return phi, normal, np.zeros_like(y)
         velocity = self.motion.point_velocity(y - phi[:, None] * normal, t)
         return phi, normal, velocity
 
