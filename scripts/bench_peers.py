@@ -159,12 +159,9 @@ def load_now() -> dict:
 
 
 def machine() -> dict:
-    model = ""
+    from distcloth.study.report import cpu_model
+    model = cpu_model()
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
         mem = Path("/proc/meminfo").read_text().split("\n")[0].split()[1]
         mem_gib = int(mem) / 2**20
     except OSError:

@@ -28,7 +28,8 @@ Per size it prints, from one process group of ``--ranks`` ranks:
   through the HDF5 writer, as ``distcloth run`` does) and the rest (wall
   minus all of these: kinematics, constraints, update and its ghost
   exchange, diagnostics);
-* contacts and CG iterations per step, the load average before and after.
+* contacts and CG iterations per step, the load average before and after,
+  and the machine (cores, system, processor).
 
 The machine is shared: the driver samples the resident set of all the
 run's processes and kills the run past ``--max-gib`` (9.5) in total,
@@ -318,8 +319,14 @@ def main():
             continue
         res["peak_total_gib"] = peak_total / 2 ** 30
         res["process_s"], res["load_before"], res["load_after"] = wall, load0, os.getloadavg()
+        res["machine"] = machine()
         print(json.dumps(res, indent=1), flush=True)
         print(summary(res), flush=True)
+
+
+def machine() -> str:
+    from distcloth.study.report import machine as described
+    return described()
 
 
 def summary(res: dict) -> str:
@@ -344,7 +351,8 @@ def summary(res: dict) -> str:
              + "; ".join(", ".join(f"{k} {v['VmHWM']:.0f}" for k, v in m.items())
                          for m in res["memory"])
              + f"; all processes {res['peak_total_gib']:.2f} GiB",
-             f"  load average before {res['load_before'][0]:.1f}, after {res['load_after'][0]:.1f}"]
+             f"  load average before {res['load_before'][0]:.1f}, after {res['load_after'][0]:.1f}; "
+             f"{res['machine']}"]
     return "\n".join(lines)
 
 

@@ -78,6 +78,20 @@ def _step_note(r) -> str:
     return ""
 
 
+def cpu_model() -> str:
+    """The processor's name (/proc/cpuinfo's first "model name"; '' where
+    there is none): machines of one kind can differ in it, and a V-cycle of
+    the same size took 2.3 times as long on one as on another."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return ""
+
+
 def machine() -> str:
     pretty = platform.platform()
     try:
@@ -87,7 +101,8 @@ def machine() -> str:
                     pretty = line.split("=", 1)[1].strip().strip('"')
     except OSError:
         pass
-    return (f"{os.cpu_count()}-core {pretty} ({platform.machine()}), "
+    cpu = cpu_model()
+    return (f"{os.cpu_count()}-core {pretty} ({platform.machine()}{', ' + cpu if cpu else ''}), "
             f"Python {platform.python_version()}")
 
 
