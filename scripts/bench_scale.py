@@ -319,14 +319,10 @@ def main():
             continue
         res["peak_total_gib"] = peak_total / 2 ** 30
         res["process_s"], res["load_before"], res["load_after"] = wall, load0, os.getloadavg()
+        from distcloth.study.report import machine
         res["machine"] = machine()
         print(json.dumps(res, indent=1), flush=True)
         print(summary(res), flush=True)
-
-
-def machine() -> str:
-    from distcloth.study.report import machine as described
-    return described()
 
 
 def summary(res: dict) -> str:
