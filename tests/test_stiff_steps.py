@@ -248,3 +248,34 @@ def test_newton_corrections_are_solved_inexactly_until_the_last(monkeypatch):
     solve_error = float(np.sqrt(np.mean(np.sum((x - x_tight) ** 2, axis=1))))
     assert solve_error < 0.01 * step_error, (solve_error, step_error)
     assert sum(s["newton_iterations"] for s in steps) <= sum(s["newton_iterations"] for s in tight) + 3
+
+
+def test_the_last_newton_residual_keeps_no_jacobians(monkeypatch):
+    # no Newton matrix follows the residual after the last iteration allowed,
+    # so the terms skip their Jacobians there (the membrane's projected element
+    # Hessians are most of its cost); the step is the same to the bit
+    from distcloth.step_context import StepContext
+    calls = []
+    forces = StepContext.forces
+
+    def logged(self, x, v, want_jac, **kw):
+        calls.append(want_jac)
+        return forces(self, x, v, want_jac, **kw)
+
+    monkeypatch.setattr(StepContext, "forces", logged)
+    # a tolerance no step meets: every step takes both iterations
+    raw = hanging_square(11, 0.01, "bdf2", 0.05, ksp_rtol=1e-3, newton_iterations=2,
+                         newton_tolerance=1e-14)
+    comm = Comm()
+    x, steps = run(raw, comm)
+    assert [s["newton_iterations"] for s in steps] == [2] * 5
+    # (the first: the simulation's start-up evaluation)
+    assert calls == [True] + [True, True, False] * 5, calls
+    residual_forces = ImplicitScheme.residual_forces
+    monkeypatch.setattr(ImplicitScheme, "residual_forces",
+                        lambda self, ctx, state, h, aff, dv, want_jac=True:
+                        residual_forces(self, ctx, state, h, aff, dv, True))
+    calls.clear()
+    x_all, _ = run(raw, comm)
+    assert calls == [True] * 16
+    assert np.array_equal(x, x_all)

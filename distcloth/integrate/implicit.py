@@ -140,9 +140,11 @@ class ImplicitScheme(Integrator):
         as good as the converged residual)."""
         return self.energy_momentum()
 
-    def residual_forces(self, ctx, state, h, aff: Affine, dv):
-        """The forces of the Newton residual at the velocity change dv (local rows)."""
-        return ctx.forces(aff.x_pred + aff.a_x * dv, state.v + aff.a_v * dv, want_jac=True)
+    def residual_forces(self, ctx, state, h, aff: Affine, dv, want_jac=True):
+        """The forces of the Newton residual at the velocity change dv (local
+        rows); with ``want_jac`` the terms keep their Jacobians for the next
+        Newton matrix."""
+        return ctx.forces(aff.x_pred + aff.a_x * dv, state.v + aff.a_v * dv, want_jac=want_jac)
 
     def history(self, state, h) -> MultistepHistory | None:
         """What the state keeps of this step if it is committed (multistep schemes)."""
@@ -182,8 +184,9 @@ class ImplicitScheme(Integrator):
             relaxed = Constraints(cons.index, cons.S, np.zeros_like(cons.z))
             delta, last = None, np.inf
 
-            def residual(dv):
-                g = m * (dv[:n] - aff.d) - aff.s * self.residual_forces(ctx, state, h, aff, dv)[:n]
+            def residual(dv, want_jac=True):
+                g = m * (dv[:n] - aff.d) - aff.s * self.residual_forces(ctx, state, h, aff, dv,
+                                                                        want_jac)[:n]
                 return g, ctx.global_norm(ctx.project(relaxed, -g)) / b0
 
             # the energy retry's Newton (newton_override) searches along its
@@ -233,11 +236,16 @@ class ImplicitScheme(Integrator):
                 newton_its += 1
                 reaction = info.reaction
                 trial = dv.copy()
+                # after the last iteration allowed no Newton matrix follows: its
+                # residual needs no Jacobians (the membrane's projected element
+                # Hessians are most of its cost where triangles are compressed;
+                # docs/benchmarks.md, "The last Newton residual without Jacobians")
+                more = newton_its < max_its
 
                 def residual_at(fraction):       # of dv + fraction * delta, into trial
                     trial[:n] = dv[:n] + fraction * delta
                     ctx.update_ghosts(trial)
-                    return residual(trial)
+                    return residual(trial, more)
 
                 fraction = 1.0
                 g_trial, rel_trial = residual_at(fraction)
@@ -500,11 +508,11 @@ class ImplicitMidpoint(ImplicitScheme):
     def energy_momentum(self):
         return self.cfg.time.energy_momentum_scheme
 
-    def residual_forces(self, ctx, state, h, aff, dv):
+    def residual_forces(self, ctx, state, h, aff, dv, want_jac=True):
         if not self.energy_momentum():
-            return super().residual_forces(ctx, state, h, aff, dv)
+            return super().residual_forces(ctx, state, h, aff, dv, want_jac)
         x1 = state.x + h * state.v + 0.5 * h * dv
-        return ctx.forces(x1, state.v + 0.5 * dv, want_jac=True, start=state.x)
+        return ctx.forces(x1, state.v + 0.5 * dv, want_jac=want_jac, start=state.x)
 
 
 class Newmark(ImplicitScheme):
@@ -526,10 +534,10 @@ class Newmark(ImplicitScheme):
             return ImplicitMidpoint.final(self, ctx, state, h, aff, dv)
         return super().final(ctx, state, h, aff, dv)
 
-    def residual_forces(self, ctx, state, h, aff, dv):
+    def residual_forces(self, ctx, state, h, aff, dv, want_jac=True):
         if self.energy_momentum():
-            return ImplicitMidpoint.residual_forces(self, ctx, state, h, aff, dv)
-        return super().residual_forces(ctx, state, h, aff, dv)
+            return ImplicitMidpoint.residual_forces(self, ctx, state, h, aff, dv, want_jac)
+        return super().residual_forces(ctx, state, h, aff, dv, want_jac)
 
     def linearise_at_predictor(self):
         # the other predictors need f0 (a0)
