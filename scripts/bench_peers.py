@@ -22,7 +22,10 @@ BDF-2 at 1 ms with ksp_rtol 1e-8, with contact as a barrier its own such
 run with Newton to 1 mm/s), computed once and cached under
 out/peers/ref/ (git-ignored).  Timed runs are interleaved across the tools
 (A, B, C, A, B, C, ...) and cached under out/peers/runs/; a second call
-only runs what is missing (--rerun: time everything again).  Blender and
+only runs what is missing (--rerun: time everything again).  Before each
+run the cores busy with other work over 3 s are recorded (and warned of
+above a quarter of the cores): the 1-minute load average right after a run
+still holds that run's own processes.  Blender and
 Newton are never needed by the project's tests or scripts/setup.sh.
 """
 from __future__ import annotations
@@ -100,7 +103,10 @@ def setting_key(tool: str, s: dict) -> str:
     contact = f"_{s['contact']}" if s.get("contact") else ""
     vtol = f"_vtol{s['velocity_tolerance']:g}" if s.get("velocity_tolerance") else ""
     aimed = f"_aimed{s['step_error_fraction']:g}" if s.get("step_error_fraction") else ""
-    return f"{s['integrator']}_{1e3 * s['step']:g}ms_rtol{rtol}{newton}{contact}{vtol}{aimed}"
+    key = f"{s['integrator']}_{1e3 * s['step']:g}ms_rtol{rtol}{newton}{contact}{vtol}{aimed}"
+    # no dots: the cached files are named stem + suffix, and a dot in the stem
+    # ("2.5ms") would make Path.with_suffix cut it there, so that repeats collide
+    return key.replace(".", "p")
 
 
 def setting_label(tool: str, s: dict) -> str:
@@ -151,11 +157,31 @@ def ensure_venv() -> Path:
 
 # ---------------------------------------------------------------- machine load
 
-def load_now() -> dict:
-    one, five, fifteen = os.getloadavg()
+BUSY_WINDOW_S = 3.0
+
+
+def _cpu_ticks() -> tuple[int, int]:
+    """(busy, total) clock ticks of all CPUs since boot (/proc/stat)."""
+    # user nice system idle iowait irq softirq steal (guest time is in user)
+    f = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
+    idle = f[3] + (f[4] if len(f) > 4 else 0)          # idle + iowait
+    return sum(f) - idle, sum(f)
+
+
+def load_now(window: float = BUSY_WINDOW_S) -> dict:
+    """The machine's use before a run. The 1-minute load average right after
+    the previous run still holds that run's own processes (it decays over a
+    minute), so the figure that says whether others are running is the CPU
+    time used over a short window before the run starts, when none of ours
+    run: busy_cores, in cores."""
     cores = os.cpu_count() or 1
+    b0, t0 = _cpu_ticks()
+    time.sleep(window)
+    b1, t1 = _cpu_ticks()
+    busy = cores * (b1 - b0) / max(t1 - t0, 1)
+    one, five, fifteen = os.getloadavg()
     return {"load1": one, "load5": five, "load15": fifteen, "cores": cores,
-            "per_core": one / cores}
+            "busy_cores": busy, "busy_window_s": window, "per_core": busy / cores}
 
 
 def machine() -> dict:
@@ -306,9 +332,9 @@ def measure(a, scene: str, tool: str, s: dict, stem: Path) -> dict:
     """One run of one tool and setting: its record (also written to stem.json)."""
     stem.parent.mkdir(parents=True, exist_ok=True)
     load = load_now()
-    if load["per_core"] > 0.5:
-        print(f"  warning: load {load['load1']:.2f} on {load['cores']} cores before this run "
-              f"(> 0.5 per core): its time is not an idle-machine figure", flush=True)
+    if load["per_core"] > 0.25:
+        print(f"  warning: {load['busy_cores']:.2f} of {load['cores']} cores busy with other "
+              f"work before this run: its time is not an idle-machine figure", flush=True)
     npz = stem.with_suffix(".npz")
     npz.unlink(missing_ok=True)
     rec = {"scene": scene, "tool": tool, "setting": s, "key": setting_key(tool, s),
@@ -373,7 +399,7 @@ def sweep(a, scene: str) -> None:
                 if rec["ok"]:
                     err = f"{1e3 * rec['error_m']:.2f} mm" if "error_m" in rec else "no reference"
                     print(f"    {rec['wall_per_sim_s']:.2f} s per sim-s, error {err}, "
-                          f"load {rec['load_before']['load1']:.2f}", flush=True)
+                          f"{rec['load_before']['busy_cores']:.2f} cores busy before", flush=True)
                 else:
                     print(f"    failed: {rec['message']}", flush=True)
 

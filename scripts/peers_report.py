@@ -3,6 +3,7 @@ scripts/bench_peers.py (out/peers/runs/, out/peers/ref/)."""
 from __future__ import annotations
 
 import json
+import re
 import statistics
 from collections import defaultdict
 from pathlib import Path
@@ -64,7 +65,8 @@ cores; Warp's CPU backend one thread).  distcloth: the loop over the steps (run'
 position reads are outside their timers too), and, separately, the whole process
 (`mpiexec` start, imports, numba cache load, set-up, partition, output).  The runs are
 interleaved across tools (A, B, C, A, B, C) so that a change of machine load hits all
-three; the 1-minute load average before each run is recorded.  Newton's graph replay needs
+three; before each run the cores busy with other work over 3 s are recorded (with the
+1-minute load average, which still holds the previous run's own processes).  Newton's graph replay needs
 an even substep count, so 6 substeps stand in for 5.  How the peers' positions at the four
 times are read: Blender's point cache after the run (untimed), Newton's state after the
 wanted frames' replays (a hook measured at < 1 ms per run).
@@ -94,7 +96,7 @@ def _summary(recs):
     row = {"tool": first["tool"], "key": first["key"], "label": first["label"],
            "steps": first["steps_per_sim_s"], "ok": bool(ok), "runs": len(recs),
            "setting": first.get("setting", {}),
-           "load": max(r["load_before"]["load1"] for r in recs),
+           "load": _load_cell([r["load_before"] for r in recs]),
            "message": "" if ok else recs[0].get("message", "")}
     if ok:
         row["wall"] = statistics.median(r["wall_per_sim_s"] for r in ok)
@@ -105,6 +107,15 @@ def _summary(recs):
         row["error_other"] = first.get("error_constraints_m")
         row["figures"] = first["figures"]
     return row
+
+
+def _load_cell(loads) -> str:
+    """The most other work seen before a setting's runs, in busy cores (records
+    written before the script measured it: a dash), and the largest 1-minute
+    load average."""
+    busy = [l["busy_cores"] for l in loads if "busy_cores" in l]
+    cell = f"{max(busy):.2f}" if len(busy) == len(loads) else "–"
+    return f"{cell} ({max(l['load1'] for l in loads):.2f})"
 
 
 def _mm(x, digits=1):
@@ -122,7 +133,7 @@ def _row(row, scene, width):
     if not row["ok"]:
         cells = [row["tool"], row["label"], f"{row['steps']:g}",
                  "**failed**: " + row["message"].replace("|", "/")] + ["–"] * (width - 6) \
-            + [f"{row['load']:.2f}", str(row["runs"])]
+            + [row["load"], str(row["runs"])]
         return "| " + " | ".join(cells) + " |"
     walls = ", ".join(f"{w:.2f}" for w in row["walls"])
     cells = [row["tool"], row["label"], f"{row['steps']:g}",
@@ -130,7 +141,7 @@ def _row(row, scene, width):
              f"{row['process']:.2f}" if row["tool"] == "distcloth" else "",
              _mm(row["error"]) + (f" ({_mm(row['error_other'])})" if row.get("error_other") else ""),
              " / ".join(_mm(e) for e in row["error_at"]) if row["error_at"] else "–",
-             *_figure_cells(row["figures"], scene), f"{row['load']:.2f}", str(row["runs"])]
+             *_figure_cells(row["figures"], scene), row["load"], str(row["runs"])]
     return "| " + " | ".join(cells) + " |"
 
 
@@ -139,7 +150,7 @@ def _table(scene, rows, ref_rows):
     head = ["tool", "setting", "steps per sim-s", "wall s per sim-s (stepping)",
             "distcloth process s per sim-s", "error mm (RMS, 0.5-2 s)",
             "error mm at 0.5 / 1 / 1.5 / 2 s", "max stretch %", "min z at 2 s [m]",
-            "min z over time [m]"] + (["gap to sphere mm"] if s2 else []) + ["load (1 min) before", "runs"]
+            "min z over time [m]"] + (["gap to sphere mm"] if s2 else []) + ["cores busy before (1-min load)", "runs"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for tool in ("blender", "newton", "distcloth"):
         for row in (r for r in rows if r["tool"] == tool):
@@ -149,7 +160,7 @@ def _table(scene, rows, ref_rows):
                      f"{ref['wall_per_sim_s']:.2f}",
                      f"{ref['process_per_sim_s']:.2f}" if tool == "distcloth" else "",
                      "0 (reference)", "", *_figure_cells(ref["figures"], scene),
-                     f"{ref['load_before']['load1']:.2f}", "1"]
+                     _load_cell([ref["load_before"]]), "1"]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -291,10 +302,12 @@ def _plot(scenes_rows, path: Path, note: str):
 def _kept_sections(page: Path) -> dict:
     """The scene sections of an earlier page, for scenes whose runs are not
     in this cache (the runs stay on the machine that made them): kept as
-    they were, marked as such, rather than dropped."""
+    they were, marked as such and with the machine that measured them,
+    rather than dropped."""
     if not page.exists():
         return {}
     text = page.read_text().split("\n## Commands")[0]
+    machine = re.search(r"^\*\*Machine\*\*: (.*?)\. Scenes of", text, re.M)
     out = {}
     for scene, title in SCENE_TITLES.items():
         head = f"## {title}\n"
@@ -303,14 +316,21 @@ def _kept_sections(page: Path) -> dict:
         body = text.split(head, 1)[1].split("\n## ", 1)[0].strip() + "\n"
         if "Not measured yet" in body:
             continue
-        while body.startswith(KEPT_NOTE):       # however many times an earlier page kept it
-            body = body.removeprefix(KEPT_NOTE)
-        out[scene] = head + "\n" + KEPT_NOTE + body
+        note = KEPT_NOTE.match(body)
+        if note:            # kept before: its note already names (or lost) the machine
+            out[scene] = head + "\n" + body
+        else:
+            on = f" on {machine.group(1)}" if machine else ""
+            out[scene] = head + "\n" + kept_note(on) + body
     return out
 
 
-KEPT_NOTE = ("From an earlier run of this script whose runs are not in this machine's "
-             "cache (out/peers/runs/): kept as that run wrote it, with its load figures.\n\n")
+KEPT_NOTE = re.compile(r"From an earlier run of this script[^\n]*\n\n")
+
+
+def kept_note(on: str) -> str:
+    return (f"From an earlier run of this script{on}, whose runs are not in this machine's "
+            "cache (out/peers/runs/): kept as that run wrote it, with its load figures.\n\n")
 
 
 def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
@@ -320,15 +340,20 @@ def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
     scenes_rows = defaultdict(list)
     for (scene, tool, key), recs in runs.items():
         scenes_rows[scene].append(_summary(recs))
-    loads = [r["load_before"]["load1"] for recs in runs.values() for r in recs]
+    before = [r["load_before"] for recs in runs.values() for r in recs]
+    loads = [l["load1"] for l in before]
+    busy = [l["busy_cores"] for l in before if "busy_cores" in l]
+    busy_text = (f"{min(busy):.2f} to {max(busy):.2f}" if busy else "not measured (records of an "
+                 "earlier version of the script)")
     text = [INTRO]
     plotted = [sc for sc in SCENE_TITLES if scenes_rows.get(sc)]
     text.append(f"**Machine**: {machine['cpu']}, {machine['cores']} cores, {machine['memory_gib']} GiB, "
                 f"Debian {machine['debian']} ({machine['system']}). Scenes of this cache's runs: "
-                f"{', '.join(plotted) or 'none'}; 1-minute load average before them: {min(loads, default=0):.2f} to "
-                f"{max(loads, default=0):.2f} ({machine['cores']} cores; a load above "
-                f"{0.5 * machine['cores']:g} means others were running and the times are not "
-                f"idle-machine figures).\n")
+                f"{', '.join(plotted) or 'none'}; cores busy with other work over the "
+                f"3 s before each run: {busy_text} of {machine['cores']} (above "
+                f"{0.25 * machine['cores']:g} the times are not idle-machine figures); 1-minute "
+                f"load average before them {min(loads, default=0):.2f} to {max(loads, default=0):.2f}, "
+                f"which still holds the previous run's own processes.\n")
     text.append("![error against wall time per simulated second](pictures/peers_pareto.png)\n")
     if plotted and any(sc in kept for sc in SCENE_TITLES if sc not in plotted):
         text.append(f"(The plot shows {', '.join(plotted)}, the scenes of this cache's runs.)\n")
@@ -362,8 +387,7 @@ def write(out: Path, root: Path, peers_dir: Path, machine: dict, times) -> None:
     for part in text[3:-1]:          # the scenes' tables, also on the console
         print(part)
     _plot(scenes_rows, root / "docs" / "pictures" / "peers_pareto.png",
-          f"1-minute load before the runs {min(loads, default=0):.1f}-{max(loads, default=0):.1f} "
-          f"on {machine['cores']} cores")
+          f"cores busy with other work before the runs: {busy_text} of {machine['cores']}")
     print(f"wrote {root / 'docs' / 'peers.md'} and docs/pictures/peers_pareto.png", flush=True)
 
 
