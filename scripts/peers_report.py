@@ -316,8 +316,7 @@ def _kept_sections(page: Path) -> dict:
         body = text.split(head, 1)[1].split("\n## ", 1)[0].strip() + "\n"
         if "Not measured yet" in body:
             continue
-        note = KEPT_NOTE.match(body)
-        if note:            # kept before: its note already names (or lost) the machine
+        if KEPT_NOTE.match(body):      # kept before: its note names the machine, if any
             out[scene] = head + "\n" + body
         else:
             on = f" on {machine.group(1)}" if machine else ""
